@@ -1,0 +1,11 @@
+"""LCO recordings: containers, readers and writers, and published data sets."""
+
+from __future__ import annotations
+
+from bayeshopf.data.datasets import flutter_cbc as flutter_cbc
+from bayeshopf.data.io import load_recordings as load_recordings
+from bayeshopf.data.io import read_cbc_mat as read_cbc_mat
+from bayeshopf.data.io import read_interchange as read_interchange
+from bayeshopf.data.io import write_interchange as write_interchange
+from bayeshopf.data.recording import Recording as Recording
+from bayeshopf.data.recording import RecordingSet as RecordingSet

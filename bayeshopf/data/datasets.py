@@ -1,0 +1,125 @@
+"""Published data sets, read from a local folder or downloaded on request.
+
+The flutter-rig recordings of Lee et al. (control-based continuation in a wind
+tunnel) are published in the MIT-licensed repository Kyounghyunlee/ML_Hopf
+(``src/measured_data/``). bayeshopf never ships them: :func:`flutter_cbc` reads
+them from a folder you name, or downloads them into pooch's cache with their
+SHA-256 hashes pinned below.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+from bayeshopf.data.io import _one_line, read_cbc_mat
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.errors import DataError
+
+__all__ = ["FLUTTER_CBC_ENV", "FLUTTER_CBC_SHA256", "FLUTTER_CBC_URL", "flutter_cbc"]
+
+FLUTTER_CBC_ENV = "BAYESHOPF_FLUTTER_CBC"
+FLUTTER_CBC_URL = "https://github.com/Kyounghyunlee/ML_Hopf/raw/main/src/measured_data/"
+FLUTTER_CBC_SHA256: dict[str, str] = {
+    "CBC_stable_v14_9.mat": "1f4656b7737b3bbb9a00528d9dbd61dccad9e3345ad62cf9423b1db644086985",
+    "CBC_stable_v15_6.mat": "96b627284c62a6a2a221a21ac18d1d23a97fc220a16c819f24f94accfba29d9b",
+    "CBC_stable_v16_5.mat": "92692963ae2eaa4a53a871b7093318194e0c3ee68085c0b1a8be811f8086eec0",
+    "CBC_stable_v17_3.mat": "15ac1986d2fea50adac18254d058f8c3342cbc8a6fdd275951cdb4623af6889d",
+    "CBC_unstable_v14_9.mat": "deee3acdf2aea60ea5773c6a47504085a232306e463430f451d54074ef5dc9bc",
+    "CBC_unstable_v15_6.mat": "35fc1405c87bd44a49919cd1460ced80c11a29429bf7912fd59863ce95e5bb01",
+    "CBC_unstable_v16_5.mat": "317e668d1fdec643ce6e8128f30a0bb0ca838c3eacfb6aaca29de01e2270ecd8",
+}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _local_files(folder: Path, origin: str) -> list[Path]:
+    """The seven files in ``folder``, each checked against its pinned hash."""
+    if not folder.is_dir():
+        what = "a file" if folder.exists() else "nothing"
+        raise DataError(
+            f"{folder}: flutter_cbc data folder ({origin}) holding the 7 CBC_*.mat files "
+            f"expected; found {what}"
+        )
+    files = []
+    for name, expected in FLUTTER_CBC_SHA256.items():
+        path = folder / name
+        if not path.is_file():
+            raise DataError(f"{name}: expected in the flutter_cbc folder {folder}; not found")
+        try:
+            found = _sha256(path)
+        except OSError as exc:
+            raise DataError(f"{name}: cannot be read ({_one_line(exc)})") from exc
+        if found != expected:
+            raise DataError(
+                f"{name}: SHA-256 {expected[:12]}... expected (the published file); "
+                f"found {found[:12]}..."
+            )
+        files.append(path)
+    return files
+
+
+def _download() -> list[Path]:
+    """Fetch the seven files into pooch's cache (hash-checked by pooch)."""
+    import pooch
+
+    cache = Path(pooch.os_cache("bayeshopf")) / "flutter_cbc"
+    files = []
+    for name, sha in FLUTTER_CBC_SHA256.items():
+        url = FLUTTER_CBC_URL + name
+        try:
+            got = pooch.retrieve(
+                url, known_hash=f"sha256:{sha}", fname=name, path=cache, progressbar=False
+            )
+        except Exception as exc:  # network, HTTP and hash-mismatch errors alike
+            raise DataError(f"{name}: download from {url} failed ({_one_line(exc)})") from exc
+        files.append(Path(got))
+    return files
+
+
+def flutter_cbc(
+    path: str | os.PathLike[str] | None = None, *, download: bool = False
+) -> RecordingSet:
+    """The wind-tunnel flutter rig's seven CBC limit-cycle recordings.
+
+    Four stable-branch LCOs (14.9, 15.6, 16.5, 17.3 m/s) and three unstable-branch
+    LCOs stabilised by control-based continuation (14.9, 15.7, 16.5 m/s); see
+    :func:`~bayeshopf.data.io.read_cbc_mat` for channels and units. The data are
+    taken from, in order: ``path``; the folder named by the environment variable
+    ``BAYESHOPF_FLUTTER_CBC``; a download into ``pooch.os_cache("bayeshopf")``
+    when ``download`` is true. Local files are checked against the pinned
+    SHA-256 hashes.
+
+    Args:
+        path: Folder holding the seven ``CBC_*.mat`` files.
+        download: Download the files (about 11 MB) from GitHub if no folder is
+            given by ``path`` or the environment.
+
+    Returns:
+        The recordings, stable branch first, each branch sorted by airspeed.
+
+    Raises:
+        DataError: If no source is given, the folder or a file is missing, a
+            file's hash differs from the published one, or a download fails.
+    """
+    origin = "path="
+    if path is None and os.environ.get(FLUTTER_CBC_ENV, "").strip():
+        path, origin = os.environ[FLUTTER_CBC_ENV].strip(), f"from ${FLUTTER_CBC_ENV}"
+    if path is not None:
+        files = _local_files(Path(path).expanduser(), origin)
+    elif download:
+        files = _download()
+    else:
+        raise DataError(
+            "flutter_cbc: a data source expected; found none. Pass path=<folder with the 7 "
+            f"CBC_*.mat files>, set {FLUTTER_CBC_ENV} to that folder, or use download=True "
+            f"(fetches them from {FLUTTER_CBC_URL})"
+        )
+    return read_cbc_mat(files)

@@ -1,0 +1,185 @@
+"""Immutable LCO recordings and recording sets.
+
+A :class:`Recording` is one measured limit-cycle oscillation held at a fixed
+value of the bifurcation parameter μ: uniformly sampled times ``t`` and named
+channels with units. A :class:`RecordingSet` groups recordings that share their
+channels and names the planar pair (z1, z2) of the paper's map U12.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Literal
+
+import numpy as np
+
+from bayeshopf.errors import DataError
+
+Branch = Literal["stable", "unstable"]
+BRANCHES: tuple[str, ...] = ("stable", "unstable")
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One LCO recording at a fixed μ.
+
+    Attributes:
+        t: Sample times in seconds, shape ``(n_t,)``, uniform spacing.
+        channels: Channel name -> samples, each of shape ``(n_t,)`` (read-only).
+        units: Channel name -> physical unit (``""`` when unknown).
+        mu: Value of the bifurcation parameter μ (for the flutter rig, the
+            airspeed in m/s).
+        branch: ``"stable"`` or ``"unstable"``.
+        name: Short name, normally the file name (reported in summaries).
+        source: Where the recording came from (a path or a description).
+    """
+
+    t: np.ndarray
+    channels: Mapping[str, np.ndarray]
+    units: Mapping[str, str]
+    mu: float
+    branch: Branch
+    name: str
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        where = self.name or self.source or "recording"
+        t = _readonly(self.t)
+        if t.ndim != 1 or t.size < 3:
+            raise DataError(f"{where}: t must be a 1-D array of >= 3 samples; got shape {t.shape}")
+        chans = {}
+        for k, v in self.channels.items():
+            v = _readonly(v)
+            if v.shape != t.shape:
+                raise DataError(
+                    f"{where}: channel '{k}' must have shape {t.shape} matching t; got {v.shape}"
+                )
+            chans[k] = v
+        if not chans:
+            raise DataError(f"{where}: expected at least one channel besides t; found none")
+        if self.branch not in BRANCHES:
+            raise DataError(
+                f"{where}: branch must be 'stable' or 'unstable'; found {self.branch!r}"
+            )
+        if not np.isfinite(float(self.mu)):
+            raise DataError(f"{where}: mu must be a finite number; found {self.mu!r}")
+        units = {k: str(self.units.get(k, "")) for k in chans}
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "channels", MappingProxyType(chans))
+        object.__setattr__(self, "units", MappingProxyType(units))
+        object.__setattr__(self, "mu", float(self.mu))
+
+    @property
+    def dt(self) -> float:
+        """Sampling interval in seconds."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+    @property
+    def duration(self) -> float:
+        """Record length in seconds."""
+        return float(self.t[-1] - self.t[0] + self.dt)
+
+    def channel(self, name: str) -> np.ndarray:
+        """Samples of one channel.
+
+        Raises:
+            DataError: If the channel does not exist.
+        """
+        if name not in self.channels:
+            raise DataError(
+                f"{self.name}: channel '{name}' expected; found {', '.join(self.channels)}"
+            )
+        return self.channels[name]
+
+    def planar(self, pair: tuple[str, str]) -> np.ndarray:
+        """The planar pair (z1, z2) as an array of shape ``(n_t, 2)``."""
+        return np.stack([self.channel(pair[0]), self.channel(pair[1])], axis=1)
+
+
+@dataclass(frozen=True)
+class RecordingSet:
+    """Recordings that share channels, with the planar pair (z1, z2) named.
+
+    Attributes:
+        recordings: The recordings, in a fixed order.
+        planar: Names of the planar pair (z1, z2) used by the map U12. z1 is the
+            channel whose peak-to-peak amplitude the bifurcation diagram shows.
+        mu_label: Name of the bifurcation parameter for plots (e.g. "airspeed").
+        mu_units: Unit of μ (e.g. "m/s").
+    """
+
+    recordings: tuple[Recording, ...]
+    planar: tuple[str, str]
+    mu_label: str = "mu"
+    mu_units: str = ""
+    extra: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        recs = tuple(self.recordings)
+        if not recs:
+            raise DataError("recording set: expected at least one recording; found none")
+        pair = tuple(self.planar)
+        if len(pair) != 2 or pair[0] == pair[1]:
+            raise DataError(f"planar pair must be two distinct channel names; got {pair!r}")
+        for r in recs:
+            for c in pair:
+                if c not in r.channels:
+                    raise DataError(
+                        f"{r.name}: planar channel '{c}' expected; "
+                        f"found channels {', '.join(r.channels)}"
+                    )
+        object.__setattr__(self, "recordings", recs)
+        object.__setattr__(self, "planar", pair)
+        object.__setattr__(self, "extra", MappingProxyType(dict(self.extra)))
+
+    def __len__(self) -> int:
+        return len(self.recordings)
+
+    def __iter__(self) -> Iterator[Recording]:
+        return iter(self.recordings)
+
+    def __getitem__(self, i: int) -> Recording:
+        return self.recordings[i]
+
+    @property
+    def mus(self) -> np.ndarray:
+        """μ of every recording, shape ``(n_rec,)``."""
+        return np.array([r.mu for r in self.recordings])
+
+    @property
+    def is_unstable(self) -> np.ndarray:
+        """Boolean mask of the unstable-branch recordings."""
+        return np.array([r.branch == "unstable" for r in self.recordings])
+
+    @property
+    def names(self) -> list[str]:
+        """Names of the recordings."""
+        return [r.name for r in self.recordings]
+
+    @property
+    def units(self) -> tuple[str, str]:
+        """Units of the planar pair (z1, z2)."""
+        r0 = self.recordings[0]
+        return (r0.units[self.planar[0]], r0.units[self.planar[1]])
+
+    def subset(self, indices: Sequence[int]) -> RecordingSet:
+        """A new set with only the recordings at ``indices`` (order kept)."""
+        return RecordingSet(
+            tuple(self.recordings[i] for i in indices),
+            self.planar,
+            self.mu_label,
+            self.mu_units,
+            self.extra,
+        )
+
+    def without(self, index: int) -> RecordingSet:
+        """A new set with recording ``index`` left out (for leave-one-out)."""
+        return self.subset([i for i in range(len(self)) if i != index])

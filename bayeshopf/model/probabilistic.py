@@ -1,0 +1,105 @@
+"""The NumPyro model: priors, the hybrid prediction and the likelihood, site by site.
+
+Priors (μ in the data's unit; lengths in frame units, where orbits are near the
+unit circle; Δμ the spread of the training μ; ``ρ`` the median measured a0):
+
+* normal form, subcritical. The gaps that keep every training μ on its branch
+  are sampled: ``g_fold = μ_min − μ_SN ~ HalfNormal(Δμ)`` and
+  ``g_hopf = μ0 − max(μ_SN, μ_u,max) ~ HalfNormal(Δμ)``. Then
+  ``μ_SN = μ_min − g_fold``, ``μ0 = max(μ_SN, μ_u,max) + g_hopf`` and
+  ``a2 = 2√(μ0 − μ_SN)``, so a2 > 0, stable recordings satisfy μ ≥ μ_SN, and
+  unstable ones satisfy μ_SN ≤ μ ≤ μ0.
+* normal form, supercritical. ``μ0 = μ_min − g_hopf`` with
+  ``g_hopf ~ HalfNormal(Δμ)``, and ``a2 = −|a2|`` with
+  ``|a2| ~ HalfNormal(2√Δμ)``.
+* map (eq. g): ``diag(T_L) ~ LogNormal(log(ρ/r̄), 1)`` with ``r̄ = (4Δμ)^{1/4}``
+  the typical normal-form radius; ``l21 ~ N(0, ρ/r̄)``; ``l13, l23 ~ N(0, ρ)``;
+  ``T_s ~ N(0, ρ)``; the μ̃-slope of the 2×2 block,
+  ``L1 = [[p1, 0], [p3, p2]]`` with ``p ~ N(0, ρ/r̄)`` (no change with μ a priori).
+* NN: unit-normal weights (scaled by 1/√fan_in), output scale
+  ``~ HalfNormal(0.1 ρ)``: a priori the correction is a tenth of the orbit size,
+  and the data must ask for more. This is what keeps the diagram from wiggling
+  between recordings.
+* noise: ``σ ~ HalfNormal(0.1 ρ)``. Each coefficient's standard deviation is
+  ``√(σ² + s²)``, where ``s`` is its measured spread over segments.
+
+Likelihood: ``Φ(R_i) ~ N(Φ(R̂_i), √(σ² + s_i²))`` for every recording i and
+coefficient (eq. XiU as a Gaussian log density). Calling the model with
+``coeffs=None`` draws from the prior or posterior predictive.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpyro
+import numpyro.distributions as dist
+
+from bayeshopf.model import hybrid
+from bayeshopf.model.hybrid import ModelSpec
+
+
+def _normal_form_sites(spec: ModelSpec):
+    span = spec.mu_span
+    if spec.criticality == "subcritical":
+        g_fold = numpyro.sample("gap_fold", dist.HalfNormal(span))
+        g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
+        mu_fold = numpyro.deterministic("mu_fold", spec.mu_min - g_fold)
+        anchor = mu_fold if spec.mu_unstable_max is None else jnp.maximum(
+            mu_fold, spec.mu_unstable_max
+        )
+        mu0 = numpyro.deterministic("mu0", anchor + g_hopf)
+        a2 = numpyro.deterministic("a2", 2.0 * jnp.sqrt(mu0 - mu_fold))
+    else:
+        g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
+        a2_abs = numpyro.sample("a2_abs", dist.HalfNormal(2.0 * jnp.sqrt(span)))
+        mu0 = numpyro.deterministic("mu0", spec.mu_min - g_hopf)
+        a2 = numpyro.deterministic("a2", -a2_abs)
+    return mu0, a2
+
+
+def typical_radius(spec: ModelSpec) -> float:
+    """``r̄ = (4Δμ)^{1/4}``, the normal-form radius scale of the priors."""
+    return float((4.0 * spec.mu_span) ** 0.25)
+
+
+def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
+    """NumPyro model of the measured Fourier features.
+
+    Args:
+        spec: Model structure and prior constants.
+        mu: μ of each recording, shape ``(n_rec,)``.
+        sign: Branch sign of each recording (+1 stable, −1 unstable).
+        coeffs_sd: Measured spread of each coefficient, ``(n_rec, 2n_h+1)``.
+        coeffs: Measured coefficients ``Φ(R_i)``, same shape, or ``None`` to
+            draw them (prior/posterior predictive).
+    """
+    rho = spec.orbit_scale
+    t_scale = rho / typical_radius(spec)
+    mu0, a2 = _normal_form_sites(spec)
+    # --- map U12 (eq. g) ---
+    T_L_diag = numpyro.sample(
+        "T_L_diag", dist.LogNormal(jnp.log(t_scale), 1.0).expand([2]).to_event(1)
+    )
+    T_L_21 = numpyro.sample("T_L_21", dist.Normal(0.0, t_scale))
+    T_L_mu = numpyro.sample("T_L_mu", dist.Normal(0.0, rho).expand([2]).to_event(1))
+    T_L1 = numpyro.sample("T_L1", dist.Normal(0.0, t_scale).expand([3]).to_event(1))
+    T_s = numpyro.sample("T_s", dist.Normal(0.0, rho).expand([2]).to_event(1))
+    sites = {"mu0": mu0, "a2": a2, "T_L_diag": T_L_diag, "T_L_21": T_L_21,
+             "T_L_mu": T_L_mu, "T_L1": T_L1, "T_s": T_s}
+    sites["nn_scale"] = numpyro.sample("nn_scale", dist.HalfNormal(0.1 * rho))
+    for i, (n_in, n_out) in enumerate(spec.nn_shapes):
+        sites[f"nn_W{i}"] = numpyro.sample(
+            f"nn_W{i}", dist.Normal(0.0, 1.0).expand([n_in, n_out]).to_event(2)
+        )
+        sites[f"nn_b{i}"] = numpyro.sample(
+            f"nn_b{i}", dist.Normal(0.0, 1.0).expand([n_out]).to_event(1)
+        )
+    sigma = numpyro.sample("sigma", dist.HalfNormal(0.1 * rho))
+    # --- prediction Φ(R̂_i) and likelihood (eq. XiU) ---
+    params = hybrid.params_from_sites(sites, spec)
+    pred = jax.vmap(lambda m, s: hybrid.predicted_coeffs(params, m, s, spec))(mu, sign)
+    pred = numpyro.deterministic("coeffs_hat", pred)
+    scale = jnp.sqrt(sigma**2 + coeffs_sd**2)
+    with numpyro.plate("recordings", mu.shape[0]):
+        numpyro.sample("coeffs", dist.Normal(pred, scale).to_event(1), obs=coeffs)
