@@ -26,7 +26,7 @@ def build_spec(
     *,
     nn_width: int = 10,
     nn_depth: int = 2,
-    n_phi: int = 96,
+    n_phi: int = 64,
     mu_label: str = "mu",
     mu_units: str = "",
 ) -> ModelSpec:
@@ -114,8 +114,11 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
         "T_L1": np.zeros(3),
         "T_s": beta[0],
         "nn_scale": 0.01 * rho,
-        # the closed-form fit's RMS error in a0, as a first guess of the noise
-        "sigma": float(np.sqrt(np.mean((a0 * (1.0 - np.exp(-resid(x)))) ** 2))) + 1e-3 * rho,
+        # the closed-form fit's RMS error in a0, as a first guess of every σ_k
+        "sigma": np.full(
+            spec.n_h + 1,
+            float(np.sqrt(np.mean((a0 * (1.0 - np.exp(-resid(x)))) ** 2))) + 1e-3 * rho,
+        ),
     }
     if spec.criticality == "subcritical":
         v["gap_fold"], v["gap_hopf"] = np.exp(x[:2])

@@ -63,9 +63,8 @@ def fit_svi(
 
     latent_draws = g.sample_posterior(k_draw, res.params, sample_shape=(n_draws,))
     # deterministic sites (mu0, a2, mu_fold, coeffs_hat) for every draw
-    det = Predictive(model, posterior_samples=latent_draws, return_sites=None)(
-        k_draw, **{**model_kwargs, "coeffs": None}
-    )
+    predictive = Predictive(model, posterior_samples=latent_draws, return_sites=None)
+    det = jax.jit(lambda k: predictive(k, **{**model_kwargs, "coeffs": None}))(k_draw)
     samples = {k: np.asarray(v) for k, v in {**latent_draws, **det}.items()}
     samples["coeffs_rep"] = samples.pop("coeffs")  # posterior predictive draws of Φ(R)
     return SviResult(

@@ -62,7 +62,7 @@ class ModelSpec:
     orbit_scale: float
     nn_width: int = 10
     nn_depth: int = 2
-    n_phi: int = 96
+    n_phi: int = 64
     mu_label: str = "mu"
     mu_units: str = ""
     extra: dict = field(default_factory=dict, compare=False, hash=False)

@@ -33,6 +33,11 @@ def fold_point(mu0, a2):
     return mu0 - a2**2 / 4.0
 
 
+def _fold_tolerance(a2, mu0):
+    """Round-off allowed in ``a2² + 4(μ−μ0)`` so that the fold itself counts as on both branches."""
+    return 64.0 * jnp.finfo(jnp.float64).eps * (a2**2 + 4.0 * jnp.abs(mu0))
+
+
 def branch_exists(mu, mu0, a2, sign):
     """Whether the LCO branch with ``sign`` (+1 stable, −1 unstable) exists at ``mu``.
 
@@ -41,7 +46,7 @@ def branch_exists(mu, mu0, a2, sign):
     """
     disc = a2**2 + 4.0 * (mu - mu0)
     r2 = 0.5 * (a2 + sign * jnp.sqrt(jnp.maximum(disc, 0.0)))
-    return (disc >= 0.0) & (r2 > 0.0)
+    return (disc >= -_fold_tolerance(a2, mu0)) & (r2 > 0.0)
 
 
 def lco_radius(mu, mu0, a2, sign):
@@ -59,5 +64,5 @@ def lco_radius(mu, mu0, a2, sign):
     """
     disc = a2**2 + 4.0 * (mu - mu0)
     r2 = 0.5 * (a2 + sign * jnp.sqrt(jnp.maximum(disc, 0.0)))
-    ok = (disc >= 0.0) & (r2 > 0.0)
+    ok = (disc >= -_fold_tolerance(a2, mu0)) & (r2 > 0.0)
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, r2, 1.0)), jnp.nan)

@@ -20,8 +20,11 @@ unit circle; Δμ the spread of the training μ; ``ρ`` the median measured a0):
   ``~ HalfNormal(0.1 ρ)``: a priori the correction is a tenth of the orbit size,
   and the data must ask for more. This is what keeps the diagram from wiggling
   between recordings.
-* noise: ``σ ~ HalfNormal(0.1 ρ)``. Each coefficient's standard deviation is
-  ``√(σ² + s²)``, where ``s`` is its measured spread over segments.
+* noise and model error: one scatter per harmonic order,
+  ``σ_k ~ HalfNormal(0.1 ρ)`` for k = 0..n_h, shared by cos kθ and sin kθ (the
+  misfit of the mean radius is larger than that of the fine shape, and a single
+  σ would inflate the predicted high harmonics). Each coefficient's standard
+  deviation is ``√(σ_k² + s²)``, where ``s`` is its measured spread over segments.
 
 Likelihood: ``Φ(R_i) ~ N(Φ(R̂_i), √(σ² + s_i²))`` for every recording i and
 coefficient (eq. XiU as a Gaussian log density). Calling the model with
@@ -56,6 +59,34 @@ def _normal_form_sites(spec: ModelSpec):
         mu0 = numpyro.deterministic("mu0", spec.mu_min - g_hopf)
         a2 = numpyro.deterministic("a2", -a2_abs)
     return mu0, a2
+
+
+_PREDICTORS: dict[int, tuple] = {}
+
+
+def _batched_prediction(spec: ModelSpec):
+    """Jitted ``(sites, μ, sign) ↦ Φ(R̂_i)`` for all recordings, cached per spec.
+
+    Jitting the whole prediction makes NumPyro's eager model traces (at
+    initialisation) one compiled call instead of hundreds of op-by-op dispatches.
+    """
+    hit = _PREDICTORS.get(id(spec))
+    if hit is None or hit[0] is not spec:
+
+        def predict(sites, mu, sign):
+            params = hybrid.params_from_sites(sites, spec)
+            return jax.vmap(lambda m, s: hybrid.predicted_coeffs(params, m, s, spec))(mu, sign)
+
+        hit = (spec, jax.jit(predict))
+        if len(_PREDICTORS) > 32:
+            _PREDICTORS.clear()
+        _PREDICTORS[id(spec)] = hit
+    return hit[1]
+
+
+def harmonic_scatter(sigma):
+    """Per-coefficient scatter ``[σ_0, σ_1..σ_n_h, σ_1..σ_n_h]`` from one σ per harmonic."""
+    return jnp.concatenate([sigma[..., :1], sigma[..., 1:], sigma[..., 1:]], axis=-1)
 
 
 def typical_radius(spec: ModelSpec) -> float:
@@ -95,11 +126,12 @@ def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
         sites[f"nn_b{i}"] = numpyro.sample(
             f"nn_b{i}", dist.Normal(0.0, 1.0).expand([n_out]).to_event(1)
         )
-    sigma = numpyro.sample("sigma", dist.HalfNormal(0.1 * rho))
+    # one scatter per harmonic order k = 0..n_h (shared by cos kθ and sin kθ)
+    sigma = numpyro.sample(
+        "sigma", dist.HalfNormal(0.1 * rho).expand([spec.n_h + 1]).to_event(1)
+    )
     # --- prediction Φ(R̂_i) and likelihood (eq. XiU) ---
-    params = hybrid.params_from_sites(sites, spec)
-    pred = jax.vmap(lambda m, s: hybrid.predicted_coeffs(params, m, s, spec))(mu, sign)
-    pred = numpyro.deterministic("coeffs_hat", pred)
-    scale = jnp.sqrt(sigma**2 + coeffs_sd**2)
+    pred = numpyro.deterministic("coeffs_hat", _batched_prediction(spec)(sites, mu, sign))
+    scale = jnp.sqrt(harmonic_scatter(sigma) ** 2 + coeffs_sd**2)
     with numpyro.plate("recordings", mu.shape[0]):
         numpyro.sample("coeffs", dist.Normal(pred, scale).to_event(1), obs=coeffs)

@@ -1,0 +1,1 @@
+"""The ``bayeshopf`` command line: ``demo``, ``fit`` and ``predict``."""

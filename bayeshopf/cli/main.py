@@ -1,0 +1,220 @@
+"""``bayeshopf`` console script.
+
+Errors in the input or the output folder are reported as one line on stderr
+(which file or field, what was expected, what was found) with exit code 2 and
+no traceback; ``--debug`` shows the traceback of unexpected errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import traceback
+from pathlib import Path
+
+EXIT_USAGE = 2
+EXIT_ERROR = 1
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty output folder (replaces bayeshopf's files only)")
+    p.add_argument("--fast", action="store_true",
+                   help="short optimisation runs (smoke tests, CI); intervals less converged")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    ap = argparse.ArgumentParser(
+        prog="bayeshopf",
+        description="Bayesian hybrid normal-form models of Hopf bifurcations from "
+        "limit-cycle-oscillation recordings.",
+    )
+    ap.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    d = sub.add_parser("demo", help="fit built-in synthetic recordings of a known Hopf system",
+                       description="Generate synthetic stable and unstable LCO recordings of a "
+                       "known subcritical Hopf system in-process (no download), fit the model, "
+                       "print the intervals next to the truth and write the figures.")
+    d.add_argument("--out", default="bayeshopf-demo", help="output folder (default bayeshopf-demo)")
+    _add_fit_options(d)
+
+    f = sub.add_parser("fit", help="fit recordings in a folder",
+                       description="Fit a folder of CBC .mat files or an interchange folder "
+                       "(manifest.csv + one CSV per recording). Writes DIR/summary.json, "
+                       "DIR/posterior.nc, DIR/model.json and DIR/figures/*.png.")
+    f.add_argument("data", help="folder of .mat files, or interchange folder")
+    f.add_argument("--out", required=True, help="output folder (refused if not empty)")
+    f.add_argument("--criticality", choices=("sub", "super", "auto"), default="sub",
+                   help="normal form: subcritical (default), supercritical, or auto "
+                   "(decided from the data)")
+    f.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
+                   help="channels of the planar pair (default: the first two)")
+    _add_fit_options(f)
+
+    p = sub.add_parser("predict", help="amplitude at μ from a saved fit",
+                       description="Amplitude median and 90%% interval at μ on a branch, "
+                       "from a folder written by 'bayeshopf fit' or 'bayeshopf demo'.")
+    p.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
+    p.add_argument("--mu", type=float, required=True, help="value of the bifurcation parameter")
+    p.add_argument("--branch", choices=("stable", "unstable"), default="stable")
+    p.add_argument("--predictive", action="store_true",
+                   help="band of a new measurement (adds the scatter σ) instead of the curve")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    return ap
+
+
+def _settings(args):
+    from bayeshopf.pipeline import FitSettings
+
+    return FitSettings.fast() if args.fast else FitSettings()
+
+
+def _print_table(summary: dict, truth: dict | None = None) -> None:
+    u, au = summary["mu_units"], summary["amplitude_units"]
+    print(f"criticality: {summary['criticality']}")
+    hdr = f"{'':8s} {'median':>10s} {'90% interval':>24s}" + (f" {'true':>10s}" if truth else "")
+    print(hdr)
+    for k in ("mu0", "a2", "mu_fold"):
+        v = summary.get(k)
+        if v is None:
+            continue
+        t = "" if not truth or truth.get(k) is None else f" {truth[k]:10.4g}"
+        unit = "" if k == "a2" else f" {u}"
+        print(f"{k:8s} {v['median']:10.4g} [{v['ci90'][0]:10.4g}, {v['ci90'][1]:10.4g}]{t}{unit}")
+    print()
+    print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
+          f"{'predicted (90%)':>30s}  [{au}]")
+    for r in summary["recordings"]:
+        p = r["predicted"]
+        flag = "" if r["inside_ci90"] else "  OUTSIDE"
+        print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {r['amplitude']:10.4g} "
+              f"{p['median']:10.4g} [{p['ci90'][0]:8.4g}, {p['ci90'][1]:8.4g}]{flag}")
+    ppc = summary["ppc"]
+    print(f"\n{ppc['amplitudes_inside_ci90']}/{ppc['n_recordings']} measured amplitudes inside "
+          f"their 90% predictive intervals; {100 * ppc['coefficients_inside_ci90']:.0f}% of the "
+          "Fourier coefficients inside theirs.")
+
+
+def _run_fit(rs, criticality, args, out, truth=None, extra=None):
+    from bayeshopf import report
+    from bayeshopf.pipeline import fit, fit_auto, with_timings
+
+    report.check_output_folder(out, args.force)
+    progress = not args.quiet
+    t0 = time.perf_counter()
+    if criticality == "auto":
+        result, evidence = fit_auto(rs, seed=args.seed, settings=_settings(args),
+                                    progress=progress)
+        extra = {**(extra or {}), "criticality_evidence": evidence}
+    else:
+        result = fit(rs, criticality, seed=args.seed, settings=_settings(args), progress=progress)
+    t1 = time.perf_counter()
+    ppc = result.ppc()
+    result = with_timings(result, predictive=time.perf_counter() - t1)
+
+    figures = None
+    if not args.no_figures:
+        from bayeshopf.plotting import plot_all
+
+        def figures(folder):
+            t = time.perf_counter()
+            paths = plot_all(result, rs, folder, truth=truth)
+            timings["figures"] = time.perf_counter() - t
+            return paths
+
+    timings: dict = {}
+    report.save_fit(result, out, force=args.force, figures=figures, ppc=ppc,
+                    extra_summary={**(extra or {}), "total_s": time.perf_counter() - t0})
+    summary = json.loads((Path(out) / report.SUMMARY).read_text())
+    if timings:  # figure time is known only after drawing; record it
+        summary["timings_s"]["figures"] = round(timings["figures"], 3)
+        summary["total_s"] = time.perf_counter() - t0
+        tmp = Path(out) / f".{report.SUMMARY}.tmp"
+        tmp.write_text(json.dumps(summary, indent=2) + "\n")
+        os.replace(tmp, Path(out) / report.SUMMARY)
+    return summary
+
+
+def cmd_demo(args) -> int:
+    """``bayeshopf demo``."""
+    from bayeshopf.data.synthetic import demo_system
+
+    rs, truth = demo_system(seed=args.seed, fast=args.fast)
+    true = {"mu0": truth.mu0, "a2": truth.a2, "mu_fold": truth.mu_fold}
+    summary = _run_fit(rs, "subcritical", args, args.out, truth=truth,
+                       extra={"truth": truth.to_dict()})
+    print(f"bayeshopf demo: {len(rs)} synthetic recordings of a known subcritical Hopf system\n")
+    _print_table(summary, true)
+    print(f"\nwrote {args.out}/summary.json, posterior.nc, model.json and figures/ "
+          f"in {summary['total_s']:.0f} s")
+    return 0
+
+
+def cmd_fit(args) -> int:
+    """``bayeshopf fit``."""
+    from bayeshopf.data import load_recordings
+
+    rs = load_recordings(args.data, planar=tuple(args.planar) if args.planar else None)
+    crit = {"sub": "subcritical", "super": "supercritical", "auto": "auto"}[args.criticality]
+    summary = _run_fit(rs, crit, args, args.out)
+    _print_table(summary)
+    print(f"\nwrote {args.out}/summary.json, posterior.nc, model.json and figures/ "
+          f"in {summary['total_s']:.0f} s")
+    return 0
+
+
+def cmd_predict(args) -> int:
+    """``bayeshopf predict``."""
+    from bayeshopf.report import load_fit
+
+    saved = load_fit(args.fit_dir)
+    iv = saved.predict(args.mu, args.branch, predictive=args.predictive)
+    p = saved.p_exists(args.mu, args.branch)
+    if args.json:
+        print(json.dumps({"mu": args.mu, "branch": args.branch, "amplitude": iv.to_json(),
+                          "p_exists": p, "units": saved.summary.get("amplitude_units", "")}))
+    else:
+        u = saved.summary.get("amplitude_units", "")
+        print(f"{args.branch} LCO at μ = {args.mu:g} {saved.summary.get('mu_units', '')}: "
+              f"amplitude {iv.median:.4g} {u}, 90% interval [{iv.lo:.4g}, {iv.hi:.4g}] {u} "
+              f"(branch exists in {100 * p:.0f}% of posterior draws)")
+    return 0
+
+
+COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    from bayeshopf.errors import BayesHopfError
+
+    try:
+        return COMMANDS[args.command](args)
+    except BayesHopfError as e:
+        print(f"bayeshopf {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"bayeshopf {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # one line unless --debug
+        if args.debug:
+            traceback.print_exc()
+        else:
+            print(f"bayeshopf {args.command}: internal error: {type(e).__name__}: "
+                  f"{str(e).splitlines()[0] if str(e) else ''} (rerun with --debug for details)",
+                  file=sys.stderr)
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,256 @@
+"""The whole job in one call: recordings → features → MAP → SVI → posterior.
+
+>>> import bayeshopf as bh
+>>> rs, truth = bh.data.synthetic.demo_system(seed=0)       # doctest: +SKIP
+>>> fit = bh.fit(rs, criticality="subcritical", seed=0)     # doctest: +SKIP
+>>> fit.interval("mu0")                                     # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, bifurcation_diagram
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck, posterior_predictive_check
+from bayeshopf.diagnostics.predictive import amplitude_draws, predictive_amplitude_draws
+from bayeshopf.diagnostics.summaries import Interval, interval
+from bayeshopf.errors import FitError
+from bayeshopf.features.orbits import DEFAULT_N_HARMONICS, OrbitFeatures, extract_features
+from bayeshopf.inference.cache import enable_compilation_cache
+from bayeshopf.inference.init import build_spec, initial_values
+from bayeshopf.inference.map import fit_map
+from bayeshopf.inference.results import MapResult, SviResult
+from bayeshopf.inference.svi import fit_svi
+from bayeshopf.model import normal_form
+from bayeshopf.model.hybrid import ModelSpec, branch_signs
+from bayeshopf.model.probabilistic import hopf_model
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Settings of :func:`fit` (the defaults are the documented ones).
+
+    Attributes:
+        n_h: Harmonics of the R(θ) features.
+        adam_steps: MAP Adam iterations.
+        lbfgs_steps: MAP L-BFGS iterations.
+        svi_steps: SVI iterations from the MAP point.
+        num_particles: ELBO particles per SVI step.
+        n_draws: Posterior draws kept.
+        guide: Autoguide, ``"mvn"`` (full-rank) or ``"lowrank"``.
+        nn_width: Neurons per hidden layer of the map's MLP.
+        nn_depth: Hidden layers of the map's MLP.
+    """
+
+    n_h: int = DEFAULT_N_HARMONICS
+    adam_steps: int = 800
+    lbfgs_steps: int = 300
+    svi_steps: int = 1500
+    num_particles: int = 2
+    n_draws: int = 1000
+    guide: str = "mvn"
+    nn_width: int = 10
+    nn_depth: int = 2
+
+    @classmethod
+    def fast(cls) -> FitSettings:
+        """Short runs for CI and smoke tests (intervals less converged)."""
+        return cls(adam_steps=500, lbfgs_steps=150, svi_steps=600, n_draws=400)
+
+
+@dataclass(frozen=True)
+class HopfFit:
+    """A fitted Bayesian hybrid model (immutable).
+
+    Attributes:
+        spec: Model structure and prior constants.
+        features: The training features.
+        map: The MAP fit.
+        svi: The SVI fit, with posterior draws in ``svi.samples``.
+        settings: Settings used.
+        seed: Seed used.
+        mu_label: Name of μ (e.g. "airspeed").
+        mu_units: Unit of μ.
+        amplitude_units: Unit of the amplitude (that of z1).
+        timings: Seconds per stage.
+    """
+
+    spec: ModelSpec
+    features: OrbitFeatures
+    map: MapResult
+    svi: SviResult
+    settings: FitSettings
+    seed: int
+    mu_label: str
+    mu_units: str
+    amplitude_units: str
+    timings: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def samples(self) -> dict:
+        """Posterior draws of every site."""
+        return self.svi.samples
+
+    @property
+    def criticality(self) -> str:
+        """``"subcritical"`` or ``"supercritical"``."""
+        return self.spec.criticality
+
+    def interval(self, name: str) -> Interval | None:
+        """Median and 90% interval of ``mu0``, ``a2`` or ``mu_fold`` (None if absent)."""
+        if name == "mu_fold":
+            if self.criticality != "subcritical":
+                return None
+            return interval(normal_form.fold_point(self.samples["mu0"], self.samples["a2"]))
+        return interval(self.samples[name])
+
+    def amplitude(self, mu, branch: str = "stable", predictive: bool = False) -> np.ndarray:
+        """Amplitude draws at μ on a branch, shape ``(n_draws, n_mu)``.
+
+        ``predictive=False`` gives the model curve; ``True`` a new recording's
+        amplitude (with the scatter σ).
+        """
+        return predict_amplitude(self.samples, self.spec, mu, branch, predictive, seed=self.seed)
+
+    def diagram(self, mu=None) -> BifurcationDiagram:
+        """The posterior bifurcation diagram."""
+        return bifurcation_diagram(self.samples, self.spec, mu, seed=self.seed)
+
+    def ppc(self) -> PosteriorPredictiveCheck:
+        """Posterior predictive check of the training recordings."""
+        return posterior_predictive_check(self.samples, self.spec, self.features)
+
+
+def _sign(branch: str) -> int:
+    if branch not in ("stable", "unstable"):
+        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    return normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
+
+
+def predict_amplitude(samples, spec, mu, branch="stable", predictive=False, *, seed=0):
+    """Amplitude draws ``(n_draws, n_mu)`` at μ on ``branch`` (see :meth:`HopfFit.amplitude`)."""
+    sign = _sign(branch)
+    if branch == "unstable" and spec.criticality != "subcritical":
+        raise FitError("a supercritical model has no unstable branch; got branch 'unstable'")
+    if predictive:
+        return predictive_amplitude_draws(samples, spec, mu, sign, jax.random.PRNGKey(seed))
+    return amplitude_draws(samples, spec, mu, sign)
+
+
+def fit(
+    recordings: RecordingSet | OrbitFeatures,
+    criticality: str = "subcritical",
+    *,
+    seed: int = 0,
+    settings: FitSettings | None = None,
+    progress: bool = True,
+    compilation_cache: bool = True,
+) -> HopfFit:
+    """Fit the Bayesian hybrid normal-form model to LCO recordings.
+
+    Stages: Fourier features of every recording; MAP by Adam then L-BFGS from
+    data-driven starting values; SVI with a multivariate-normal autoguide
+    started at the MAP point; ``settings.n_draws`` posterior draws.
+
+    Args:
+        recordings: The recordings, or features already extracted from them.
+        criticality: ``"subcritical"`` or ``"supercritical"``.
+        seed: Seed of every random choice (results are reproducible from it).
+        settings: Step counts and model sizes (:class:`FitSettings`).
+        progress: Show progress bars.
+        compilation_cache: Use JAX's persistent compilation cache.
+
+    Returns:
+        A :class:`HopfFit`.
+    """
+    settings = settings or FitSettings()
+    if compilation_cache:
+        enable_compilation_cache()
+    timings = {}
+    t0 = time.perf_counter()
+    if isinstance(recordings, RecordingSet):
+        features = extract_features(recordings, n_h=settings.n_h)
+        mu_label, mu_units = recordings.mu_label, recordings.mu_units
+        amp_units = recordings.units[0]
+    else:
+        features = recordings
+        mu_label, mu_units = "mu", ""
+        amp_units = features.frame.units[0]
+    spec = build_spec(
+        features, criticality, nn_width=settings.nn_width, nn_depth=settings.nn_depth,
+        mu_label=mu_label, mu_units=mu_units,
+    )
+    timings["features"] = time.perf_counter() - t0
+
+    kwargs = dict(
+        spec=spec,
+        mu=jnp.asarray(features.mu),
+        sign=jnp.asarray(branch_signs(features.unstable), dtype=float),
+        coeffs_sd=jnp.asarray(features.coeffs_sd),
+        coeffs=jnp.asarray(features.coeffs),
+    )
+    k_map, k_svi = jax.random.split(jax.random.PRNGKey(seed))
+    t0 = time.perf_counter()
+    map_result = fit_map(
+        hopf_model, kwargs, initial_values(features, spec), key=k_map,
+        adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
+    )
+    if not np.isfinite(map_result.losses[-1]):
+        raise FitError("MAP did not converge: the loss is not finite")
+    timings["map"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    svi_result = fit_svi(
+        hopf_model, kwargs, map_result, key=k_svi, steps=settings.svi_steps,
+        num_particles=settings.num_particles, guide=settings.guide,
+        n_draws=settings.n_draws, progress=progress,
+    )
+    timings["svi"] = time.perf_counter() - t0
+    return HopfFit(
+        spec=spec, features=features, map=map_result, svi=svi_result, settings=settings,
+        seed=seed, mu_label=mu_label, mu_units=mu_units, amplitude_units=amp_units,
+        timings=timings,
+    )
+
+
+def with_timings(fit_: HopfFit, **extra: float) -> HopfFit:
+    """A copy of ``fit_`` with more stage timings recorded."""
+    return replace(fit_, timings={**fit_.timings, **extra})
+
+
+def fit_auto(
+    recordings: RecordingSet,
+    *,
+    seed: int = 0,
+    settings: FitSettings | None = None,
+    progress: bool = True,
+) -> tuple[HopfFit, dict]:
+    """Fit with the criticality decided from the data.
+
+    Unstable LCO recordings settle it: a supercritical Hopf has none, so the
+    model is subcritical. Otherwise both models are fitted and compared by
+    PSIS-LOO (ArviZ), and the one with the higher expected log predictive
+    density is returned.
+
+    Returns:
+        ``(fit, evidence)``; ``evidence`` says how the choice was made.
+    """
+    from bayeshopf.diagnostics.comparison import compare_criticality
+
+    if recordings.is_unstable.any():
+        return fit(recordings, "subcritical", seed=seed, settings=settings, progress=progress), {
+            "method": "unstable recordings present",
+            "detail": f"{int(recordings.is_unstable.sum())} unstable LCO recording(s); a "
+            "supercritical Hopf bifurcation has no unstable LCOs",
+            "preferred": "subcritical",
+        }
+    fits = {c: fit(recordings, c, seed=seed, settings=settings, progress=progress)
+            for c in ("subcritical", "supercritical")}
+    evidence = compare_criticality(fits)
+    evidence["method"] = "PSIS-LOO"
+    return fits[evidence["preferred"]], evidence

@@ -1,0 +1,127 @@
+"""Journal-quality figures of a fit: bifurcation diagram, phase portraits, predictive check.
+
+Every plotting function is pure: it takes result records (a
+:class:`~bayeshopf.diagnostics.bifurcation.BifurcationDiagram`, posterior draws,
+a :class:`~bayeshopf.diagnostics.ppc.PosteriorPredictiveCheck`, ...) and returns
+a new :class:`matplotlib.figure.Figure` that is not registered with pyplot, so
+no global matplotlib state (current figure, rcParams) is read or changed.
+:func:`save_figure` writes a figure atomically and :func:`plot_all` draws the
+standard set of a :class:`~bayeshopf.pipeline.HopfFit`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.diagnostics.bifurcation import default_mu_grid
+from bayeshopf.plotting._io import save_figure
+from bayeshopf.plotting.diagram import plot_bifurcation
+from bayeshopf.plotting.phase import plot_phase_portraits
+from bayeshopf.plotting.ppc import coefficient_labels, plot_ppc
+
+__all__ = [
+    "FIGURE_NAMES",
+    "coefficient_labels",
+    "default_zoom",
+    "diagram_grid",
+    "plot_all",
+    "plot_bifurcation",
+    "plot_phase_portraits",
+    "plot_ppc",
+    "save_figure",
+]
+
+#: File names written by :func:`plot_all`, in order.
+FIGURE_NAMES = ("bifurcation.png", "phase_portraits.png", "ppc.png")
+
+
+def diagram_grid(fit, n: int = 160, n_refine: int = 40) -> np.ndarray:
+    """μ grid for the diagram of ``fit``, refined about the Hopf and fold points.
+
+    The amplitude has a square-root singularity at the Hopf point and at the
+    fold, so a uniform grid leaves the branches visibly short of those points;
+    ``n_refine`` extra points are spread over each point's 90% interval widened
+    by two grid steps.
+
+    Args:
+        fit: A :class:`~bayeshopf.pipeline.HopfFit`.
+        n: Points of the uniform base grid (:func:`default_mu_grid`).
+        n_refine: Extra points about each of the Hopf and fold points.
+    """
+    base = default_mu_grid(fit.spec, fit.samples, n)
+    step = float(base[1] - base[0])
+    extra = []
+    for name in ("mu0", "mu_fold"):
+        iv = fit.interval(name)
+        if iv is not None and np.isfinite([iv.lo, iv.hi]).all():
+            extra.append(np.linspace(iv.lo - 2 * step, iv.hi + 2 * step, n_refine))
+    mu = np.unique(np.concatenate([base, *extra]))
+    return mu[(mu >= base[0]) & (mu <= base[-1])]
+
+
+def default_zoom(fit, mu: np.ndarray) -> tuple[float, float]:
+    """μ window about the stable recording of largest μ (±5% of the grid's span).
+
+    That is where the diagram is furthest from the Hopf point and its bands,
+    measured interval and any truth can be compared at a glance in an inset.
+    """
+    f = fit.features
+    stable = ~np.asarray(f.unstable, bool)
+    mus = np.asarray(f.mu, float)[stable] if stable.any() else np.asarray(f.mu, float)
+    centre = float(mus.max())
+    half = 0.05 * float(mu.max() - mu.min())
+    return max(centre - half, float(mu.min())), min(centre + half, float(mu.max()))
+
+
+def plot_all(
+    fit,
+    recordings: RecordingSet,
+    out_dir: str | os.PathLike[str],
+    truth=None,
+    *,
+    zoom: bool = True,
+    dpi: int = 150,
+) -> list[Path]:
+    """Draw and save the standard figures of a fit.
+
+    Writes ``bifurcation.png`` (:func:`plot_bifurcation` with the training
+    amplitudes), ``phase_portraits.png`` (:func:`plot_phase_portraits`) and
+    ``ppc.png`` (:func:`plot_ppc`) into ``out_dir``, each atomically.
+
+    Args:
+        fit: A :class:`~bayeshopf.pipeline.HopfFit`.
+        recordings: The recordings it was fitted to (for the phase portraits).
+        out_dir: Destination folder (created if missing).
+        truth: Optional planted system
+            (:class:`~bayeshopf.data.synthetic.PlantedHopf`) whose amplitude
+            curve and orbits are overlaid.
+        zoom: Add an inset magnifying the diagram about the stable recording
+            of largest μ (:func:`default_zoom`), placed where it hides nothing.
+        dpi: Resolution of the PNG files.
+
+    Returns:
+        The paths written, in the order of :data:`FIGURE_NAMES`.
+    """
+    out = Path(out_dir)
+    z1 = fit.spec.frame.names[0]
+    amp_label = f"peak-to-peak of {z1}"
+    ppc = fit.ppc()
+    mu = diagram_grid(fit)
+    diagram = fit.diagram(mu)
+    amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
+    orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
+    figures = [
+        plot_bifurcation(
+            diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
+            amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
+            zoom=default_zoom(fit, mu) if zoom else None,
+        ),
+        plot_phase_portraits(fit.samples, fit.spec, recordings, truth=orbit_truth),
+        plot_ppc(ppc, amplitude_units=fit.amplitude_units, amplitude_label=amp_label),
+    ]
+    return [save_figure(fig, out / name, dpi=dpi)
+            for fig, name in zip(figures, FIGURE_NAMES, strict=True)]

@@ -1,0 +1,394 @@
+"""The posterior bifurcation diagram: amplitude against μ with credible bands."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerBase, HandlerTuple
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+
+from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.errors import DataError
+from bayeshopf.plotting._style import (
+    BRANCH_COLOURS,
+    BRANCH_MARKERS,
+    LABEL_SIZE,
+    LEGEND_SIZE,
+    TICK_SIZE,
+    axis_label,
+    marker_face,
+    new_figure,
+    style_axes,
+    tag,
+)
+
+#: Callable giving the true amplitude, ``truth(mu, branch) -> amplitude``.
+AmplitudeTruth = Callable[[np.ndarray, str], np.ndarray]
+
+_LINESTYLES = {"stable": "-", "unstable": "--"}
+#: Opacity of the 90% and 50% credible bands.
+_ALPHA_90, _ALPHA_50 = 0.18, 0.38
+_MEDIAN_LW = 2.0
+
+
+class _BandKey:
+    """Legend key of a branch: 90% band, 50% band and the median line."""
+
+    def __init__(self, colour: str, linestyle: str):
+        self.colour = colour
+        self.linestyle = linestyle
+
+
+class _BandHandler(HandlerBase):
+    """Draws a :class:`_BandKey` as nested rectangles with the median line across."""
+
+    def create_artists(self, legend, orig_handle, xdescent, ydescent, width, height, fontsize,
+                       trans):
+        """Artists of one legend key (matplotlib's legend handler protocol)."""
+        x0, y0 = -xdescent, -ydescent
+        c = orig_handle.colour
+        outer = Rectangle((x0, y0 - 0.15 * height), width, 1.3 * height, facecolor=c,
+                          alpha=_ALPHA_90, lw=0, transform=trans)
+        inner = Rectangle((x0, y0 + 0.2 * height), width, 0.6 * height, facecolor=c,
+                          alpha=_ALPHA_50, lw=0, transform=trans)
+        line = Line2D([x0, x0 + width], [y0 + 0.5 * height] * 2, color=c, lw=_MEDIAN_LW,
+                      ls=orig_handle.linestyle, transform=trans)
+        return [outer, inner, line]
+
+
+def _branches(diagram: BifurcationDiagram) -> list[tuple[str, BranchBand]]:
+    out = [("stable", diagram.stable)]
+    if diagram.unstable is not None:
+        out.append(("unstable", diagram.unstable))
+    return out
+
+
+def _masked(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    return np.where(keep, values, np.nan)
+
+
+def _draw_band(ax: Axes, branch: str, band: BranchBand, min_p_exists: float) -> None:
+    colour = BRANCH_COLOURS[branch]
+    keep = np.asarray(band.p_exists) >= min_p_exists
+    q = _masked(np.asarray(band.quantiles, float), keep)
+    mu = np.asarray(band.mu, float)
+    ok90 = np.isfinite(q[0]) & np.isfinite(q[4])
+    ok50 = np.isfinite(q[1]) & np.isfinite(q[3])
+    ax.fill_between(mu, q[0], q[4], where=ok90, color=colour, alpha=_ALPHA_90, lw=0,
+                    gid=f"{branch}-band90")
+    ax.fill_between(mu, q[1], q[3], where=ok50, color=colour, alpha=_ALPHA_50, lw=0,
+                    gid=f"{branch}-band50")
+    ax.plot(mu, q[2], color=colour, lw=_MEDIAN_LW, ls=_LINESTYLES[branch],
+            gid=f"{branch}-median")
+    pred = _masked(np.asarray(band.predictive, float), keep)
+    for row in (pred[0], pred[4]):
+        ax.plot(mu, row, color=colour, lw=0.8, ls=":", gid=f"{branch}-predictive")
+
+
+def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck) -> None:
+    mu = np.asarray(ppc.mu, float)
+    unstable = np.asarray(ppc.unstable, bool)
+    measured = np.asarray(ppc.measured, float)
+    for branch, mask in (("stable", ~unstable), ("unstable", unstable)):
+        if not mask.any():
+            continue
+        colour = BRANCH_COLOURS[branch]
+        ivs = [iv for iv, m in zip(ppc.predictive, mask, strict=True) if m]
+        med = np.array([iv.median for iv in ivs])
+        err = np.array([[iv.median - iv.lo for iv in ivs], [iv.hi - iv.median for iv in ivs]])
+        bars = ax.errorbar(mu[mask], med, yerr=err, fmt="none", ecolor=colour, elinewidth=1.0,
+                           capsize=2.5, capthick=1.0, zorder=4)
+        tag(bars, f"{branch}-measured-interval")
+        ax.plot(mu[mask], measured[mask], ls="none", marker=BRANCH_MARKERS[branch], ms=5,
+                mfc=marker_face(branch), mec=colour, mew=1.2, zorder=5,
+                gid=f"{branch}-measured")
+
+
+def _edges(f: Callable[[np.ndarray], np.ndarray], mu: np.ndarray) -> np.ndarray:
+    """Points where ``f`` changes between finite and nan, located by bisection."""
+    finite = np.isfinite(f(mu))
+    out = []
+    for j in np.flatnonzero(finite[1:] != finite[:-1]):
+        lo, hi = float(mu[j]), float(mu[j + 1])
+        flo = finite[j]
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            if bool(np.isfinite(f(np.array([mid])))[0]) == flo:
+                lo = mid
+            else:
+                hi = mid
+        out.append(lo if flo else hi)
+    return np.asarray(out)
+
+
+def _truth_curve(truth: AmplitudeTruth, branch: str, lo: float, hi: float):
+    """Dense μ grid (refined near the ends of the branch) and the true amplitude there."""
+
+    def f(m):
+        return np.asarray(truth(m, branch), float).reshape(np.shape(m))
+
+    mu = np.linspace(lo, hi, 1501)
+    try:
+        edges = _edges(f, mu)
+    except (DataError, ValueError):  # a truth without this branch
+        return None
+    step = mu[1] - mu[0]
+    extra = [e + s * np.geomspace(1e-9 * step, step, 40) for e in edges for s in (-1.0, 1.0)]
+    mu = np.unique(np.concatenate([mu, edges, *extra]))
+    mu = mu[(mu >= lo) & (mu <= hi)]
+    amp = f(mu)
+    if not np.isfinite(amp).any():
+        return None
+    return mu, amp
+
+
+def _draw_points(ax: Axes, diagram: BifurcationDiagram) -> None:
+    """The Hopf point at amplitude 0 and the fold at its amplitude, with 90% intervals."""
+    style = dict(color="k", mfc="white", mew=1.2, ms=6, elinewidth=1.0, capsize=3,
+                 capthick=1.0, zorder=7, ls="none")
+    h0 = diagram.mu0
+    hopf = ax.errorbar([h0.median], [0.0], xerr=[[h0.median - h0.lo], [h0.hi - h0.median]],
+                       marker="D", **style)
+    tag(hopf, "hopf")
+    if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
+        f, fa = diagram.mu_fold, diagram.fold_amplitude
+        fold = ax.errorbar([f.median], [fa.median], xerr=[[f.median - f.lo], [f.hi - f.median]],
+                           yerr=[[fa.median - fa.lo], [fa.hi - fa.median]], marker="^", **style)
+        tag(fold, "fold")
+
+
+def _draw_all(ax, diagram, ppc, truth_curves, min_p_exists) -> None:
+    for branch, band in _branches(diagram):
+        _draw_band(ax, branch, band, min_p_exists)
+    if ppc is not None:
+        _draw_measured(ax, ppc)
+    for mu, amp in truth_curves:
+        ax.plot(mu, amp, color="k", lw=0.6, zorder=6, gid="truth")
+    _draw_points(ax, diagram)
+
+
+def _legend_entries(diagram, ppc, truth_curves, mu_units) -> tuple[list, list[str]]:
+    handles: list = []
+    labels: list[str] = []
+    branches = _branches(diagram)
+    for branch, _ in branches:
+        handles.append(_BandKey(BRANCH_COLOURS[branch], _LINESTYLES[branch]))
+        labels.append(f"{branch} branch: median, 50% and 90% CI")
+    handles.append(tuple(Line2D([], [], color=BRANCH_COLOURS[b], lw=0.8, ls=":")
+                         for b, _ in branches))
+    labels.append("90% predictive band, new recording")
+    if ppc is not None:
+        unstable = np.asarray(ppc.unstable, bool)
+        for branch, present in (("stable", (~unstable).any()), ("unstable", unstable.any())):
+            if not present:
+                continue
+            c = BRANCH_COLOURS[branch]
+            handles.append(Line2D([], [], ls="-", lw=1.0, color=c, marker=BRANCH_MARKERS[branch],
+                                  ms=5, mfc=marker_face(branch), mec=c, mew=1.2))
+            labels.append(f"measured, {branch} (90% predictive interval)")
+    if truth_curves:
+        handles.append(Line2D([], [], color="k", lw=0.6))
+        labels.append("true")
+    point = dict(color="k", mfc="white", mew=1.2, ms=6, ls="none")
+    handles.append(Line2D([], [], marker="D", **point))
+    labels.append(f"Hopf point (90% CI): {_fmt_interval(diagram.mu0, mu_units)}")
+    if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
+        handles.append(Line2D([], [], marker="^", **point))
+        labels.append(f"fold (90% CI): {_fmt_interval(diagram.mu_fold, mu_units)}")
+    return handles, labels
+
+
+def _zoom_ylim(diagram, ppc, truth_curves, window) -> tuple[float, float] | None:
+    """The y range of everything drawn inside the μ window (wild predictive values ignored)."""
+    lo, hi = window
+    ys = []
+    for _, band in _branches(diagram):
+        inside = (band.mu >= lo) & (band.mu <= hi)
+        q = np.asarray(band.quantiles, float)[:, inside]
+        ys.append(q.ravel())
+        pred = np.asarray(band.predictive, float)[:, inside]
+        cap = _finite_max(q[4]) * 1.5
+        ys.append(np.where(pred <= cap, pred, np.nan).ravel())
+    if ppc is not None:
+        inside = (ppc.mu >= lo) & (ppc.mu <= hi)
+        ys.append(np.asarray(ppc.measured, float)[inside])
+        ys.append(np.array([v for iv, k in zip(ppc.predictive, inside, strict=True) if k
+                            for v in (iv.lo, iv.hi)], float))
+    for mu, amp in truth_curves:
+        ys.append(amp[(mu >= lo) & (mu <= hi)])
+    y = np.concatenate(ys) if ys else np.array([])
+    y = y[np.isfinite(y)]
+    if y.size == 0:
+        return None
+    pad = 0.12 * max(float(y.max() - y.min()), 1e-12 * max(abs(float(y.max())), 1.0))
+    return float(y.min()) - pad, float(y.max()) + pad
+
+
+#: Candidate inset positions (axes fractions), in order of preference: the
+#: lower-right corner first (right of the Hopf point, under the stable branch),
+#: then the other corners, each at decreasing sizes.
+_CORNERS = tuple(
+    (x, y, w, h)
+    for w, h in ((0.30, 0.38), (0.26, 0.34), (0.22, 0.30))
+    for x, y in ((0.97 - w, 0.09), (0.09, 0.95 - h), (0.09, 0.09), (0.97 - w, 0.95 - h))
+)
+
+
+def _drawn_points(diagram, ppc, truth_curves) -> np.ndarray:
+    """(μ, amplitude) of the medians, bands, data and markers, shape ``(n, 2)``."""
+    pts = []
+    for _, band in _branches(diagram):
+        q = np.asarray(band.quantiles, float)
+        for row in q:
+            pts.append(np.column_stack([band.mu, row]))
+    if ppc is not None:
+        pts.append(np.column_stack([ppc.mu, ppc.measured]))
+    for mu, amp in truth_curves:
+        pts.append(np.column_stack([mu, amp]))
+    pts.append(np.array([[diagram.mu0.lo, 0.0], [diagram.mu0.hi, 0.0]]))
+    if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
+        pts.append(np.array([[diagram.mu_fold.median, diagram.fold_amplitude.median]]))
+    p = np.concatenate(pts)
+    return p[np.isfinite(p).all(axis=1)]
+
+
+def _free_corner(ax: Axes, points: np.ndarray):
+    """The first of :data:`_CORNERS` whose box (with room for tick labels) holds no point."""
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    fx = (points[:, 0] - x0) / (x1 - x0)
+    fy = (points[:, 1] - y0) / (y1 - y0)
+    for bx, by, bw, bh in _CORNERS:
+        left, bottom = bx - 0.07, by - 0.07  # room for the inset's tick labels
+        inside = (fx >= left) & (fx <= bx + bw + 0.02) & (fy >= bottom) & (fy <= by + bh + 0.02)
+        if not inside.any():
+            return (bx, by, bw, bh)
+    return None
+
+
+def plot_bifurcation(
+    diagram: BifurcationDiagram,
+    ppc: PosteriorPredictiveCheck | None = None,
+    *,
+    mu_label: str = "μ",
+    mu_units: str = "",
+    amplitude_units: str = "",
+    amplitude_label: str | None = None,
+    truth: AmplitudeTruth | None = None,
+    min_p_exists: float = 0.05,
+    legend: bool = True,
+    zoom: tuple[float, float] | None = None,
+    zoom_bounds: tuple[float, float, float, float] | str = "auto",
+    ax: Axes | None = None,
+) -> Figure:
+    """Plot the posterior bifurcation diagram (amplitude against μ).
+
+    Each branch is drawn in its own colour (stable C0, unstable C3): its
+    posterior median as a line (solid stable, dashed unstable), its 50% credible
+    band darker and 90% band lighter, and the 90% posterior predictive band of a
+    new recording (curve uncertainty plus scatter) as thin dotted lines. The
+    unstable branch is drawn only where it exists in at least ``min_p_exists``
+    of the draws. The Hopf point is marked at amplitude zero and the fold at its
+    amplitude, each with its 90% interval as error bars. The y range follows the
+    credible bands and the data; predictive quantiles beyond it are clipped.
+
+    Args:
+        diagram: The posterior diagram (:meth:`HopfFit.diagram`).
+        ppc: Posterior predictive check of the training recordings; when given,
+            the measured amplitudes are drawn as markers (filled circles stable,
+            open squares unstable) with each recording's 90% predictive interval.
+        mu_label: Name of μ for the x axis.
+        mu_units: Unit of μ.
+        amplitude_units: Unit of the amplitude (that of z1).
+        amplitude_label: y-axis text; default ``"peak-to-peak of z1"``.
+        truth: Optional ``truth(mu, branch) -> amplitude`` drawn as thin black
+            lines (e.g. the planted system of a synthetic data set).
+        min_p_exists: Smallest posterior probability of existence at which a
+            branch's band is drawn.
+        legend: Whether to add a legend (below the axes).
+        zoom: Optional μ window ``(lo, hi)`` shown magnified in an inset, for
+            bands too narrow to see at full scale.
+        zoom_bounds: Inset position ``(x0, y0, width, height)`` in axes
+            fractions, or ``"auto"``: the first corner of the axes (lower right,
+            upper left, lower left, upper right) clear of the curves and
+            markers; no inset is drawn when none is clear.
+        ax: Axes to draw into; a new figure is made when ``None``.
+
+    Returns:
+        The figure holding the axes.
+    """
+    if ax is None:
+        fig = new_figure(6.4, 5.0)
+        ax = fig.add_subplot()
+    else:
+        fig = ax.figure
+    style_axes(ax)
+    mu_all = np.asarray(diagram.stable.mu, float)
+    mu_lo, mu_hi = float(mu_all.min()), float(mu_all.max())
+    truth_curves = []
+    if truth is not None:
+        for branch, _ in _branches(diagram):
+            curve = _truth_curve(truth, branch, mu_lo, mu_hi)
+            if curve is not None:
+                truth_curves.append(curve)
+
+    _draw_all(ax, diagram, ppc, truth_curves, min_p_exists)
+
+    # The y range follows the credible bands and the data, not the predictive
+    # band, so that a few wild predictive quantiles cannot flatten the figure.
+    top = max(_finite_max(np.asarray(b.quantiles, float)[4]) for _, b in _branches(diagram))
+    if diagram.fold_amplitude is not None:
+        top = max(top, _finite_max(np.array([diagram.fold_amplitude.hi])))
+    if ppc is not None:
+        top = max(top, float(np.max(ppc.measured)), max(iv.hi for iv in ppc.predictive))
+    top = float(top) if np.isfinite(top) and top > 0 else 1.0
+    ax.set_xlim(mu_lo, mu_hi)
+    ax.set_ylim(-0.04 * top, 1.08 * top)
+    ax.set_xlabel(axis_label(mu_label, mu_units), fontsize=LABEL_SIZE)
+    ax.set_ylabel(axis_label(amplitude_label or "peak-to-peak of z1", amplitude_units),
+                  fontsize=LABEL_SIZE)
+
+    if zoom is not None:
+        ylim = _zoom_ylim(diagram, ppc, truth_curves, zoom)
+        bounds = zoom_bounds
+        if isinstance(zoom_bounds, str):
+            bounds = _free_corner(ax, _drawn_points(diagram, ppc, truth_curves))
+        if ylim is not None and bounds is not None:
+            inset = ax.inset_axes(list(bounds))
+            _draw_all(inset, diagram, ppc, truth_curves, min_p_exists)
+            style_axes(inset, grid=False)
+            inset.minorticks_off()
+            inset.tick_params(labelsize=TICK_SIZE - 1.5, pad=2)
+            inset.locator_params(nbins=3)
+            inset.set_xlim(*zoom)
+            inset.set_ylim(*ylim)
+            inset.set_facecolor("white")
+            ax.indicate_inset_zoom(inset, edgecolor="0.4", alpha=0.8, lw=0.6)
+
+    if legend:
+        handles, labels = _legend_entries(diagram, ppc, truth_curves, mu_units)
+        ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
+                  fontsize=LEGEND_SIZE, frameon=False, handlelength=3.0, handleheight=1.5,
+                  columnspacing=1.5,
+                  handler_map={tuple: HandlerTuple(ndivide=None, pad=0.3),
+                               _BandKey: _BandHandler()})
+    return fig
+
+
+def _finite_max(a: np.ndarray) -> float:
+    a = a[np.isfinite(a)]
+    return float(a.max()) if a.size else 0.0
+
+
+def _fmt_interval(iv, units: str) -> str:
+    """``"18.00 [17.99, 18.01] m/s"`` with enough digits to tell the ends apart."""
+    width = abs(iv.hi - iv.lo)
+    scale = max(abs(iv.median), 1e-300)
+    digits = int(np.clip(np.ceil(-np.log10(max(width, 1e-12 * scale))) + 1, 0, 6))
+    fmt = f"{{:.{digits}f}}"
+    text = f"{fmt.format(iv.median)} [{fmt.format(iv.lo)}, {fmt.format(iv.hi)}]"
+    return f"{text} {units}".rstrip()

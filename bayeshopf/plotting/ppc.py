@@ -1,0 +1,130 @@
+"""Posterior predictive check figure: amplitudes and Fourier-coefficient residuals."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.plotting._style import (
+    BRANCH_COLOURS,
+    BRANCH_MARKERS,
+    LABEL_SIZE,
+    LEGEND_SIZE,
+    TICK_SIZE,
+    TITLE_SIZE,
+    axis_label,
+    marker_face,
+    new_figure,
+    style_axes,
+    tag,
+)
+
+#: Colour scale limit of the standardised residuals.
+Z_CLIP = 3.0
+
+
+def coefficient_labels(n_c: int) -> list[str]:
+    """Names ``a0, a1..an, b1..bn`` of the ``n_c = 2n + 1`` Fourier coefficients."""
+    if n_c < 1 or n_c % 2 == 0:
+        raise ValueError(f"expected an odd number of coefficients (2 n_h + 1); got {n_c}")
+    n_h = (n_c - 1) // 2
+    return ["a0", *(f"a{k}" for k in range(1, n_h + 1)), *(f"b{k}" for k in range(1, n_h + 1))]
+
+
+def _bars(ivs) -> tuple[np.ndarray, np.ndarray]:
+    med = np.array([iv.median for iv in ivs], float)
+    err = np.array([[iv.median - iv.lo for iv in ivs], [iv.hi - iv.median for iv in ivs]], float)
+    return med, np.clip(err, 0.0, None)
+
+
+def plot_ppc(
+    ppc: PosteriorPredictiveCheck,
+    *,
+    amplitude_units: str = "",
+    amplitude_label: str = "amplitude",
+) -> Figure:
+    """Plot the posterior predictive check of the training recordings.
+
+    Panel (a): each recording's posterior predictive amplitude (median and 90%
+    interval, thin bars) and the model curve's 90% interval (thick inner bars)
+    against its measured amplitude, with the line y = x. Panel (b): heatmap of
+    the standardised residuals of the Fourier coefficients,
+    ``(Φ − mean Φ̃)/sd Φ̃``, per recording and coefficient, on a diverging scale
+    clipped at ±3.
+
+    Args:
+        ppc: The check (:meth:`HopfFit.ppc`).
+        amplitude_units: Unit of the amplitude.
+        amplitude_label: Name of the amplitude in the axis labels (e.g.
+            ``"peak-to-peak of h"``).
+
+    Returns:
+        The figure: the two panels and the colour bar.
+    """
+    fig = new_figure(7.2, 3.3)
+    grid = fig.add_gridspec(1, 2, width_ratios=(1.0, 1.7), wspace=0.08)
+    ax_a = fig.add_subplot(grid[0, 0])
+    ax_b = fig.add_subplot(grid[0, 1])
+
+    measured = np.asarray(ppc.measured, float)
+    unstable = np.asarray(ppc.unstable, bool)
+    style_axes(ax_a)
+    handles, labels = [], []
+    for branch, mask in (("stable", ~unstable), ("unstable", unstable)):
+        if not mask.any():
+            continue
+        c = BRANCH_COLOURS[branch]
+        idx = np.flatnonzero(mask)
+        med, err = _bars([ppc.predictive[i] for i in idx])
+        cmed, cerr = _bars([ppc.curve[i] for i in idx])
+        pred_bars = ax_a.errorbar(measured[idx], med, yerr=err, fmt="none", ecolor=c,
+                                  elinewidth=0.9, capsize=2.5, capthick=0.9, zorder=3)
+        tag(pred_bars, f"{branch}-predictive")
+        curve_bars = ax_a.errorbar(measured[idx], cmed, yerr=cerr, fmt="none", ecolor=c,
+                                   elinewidth=3.0, alpha=0.6, zorder=4)
+        tag(curve_bars, f"{branch}-curve")
+        ax_a.plot(measured[idx], med, ls="none", marker=BRANCH_MARKERS[branch], ms=4.5,
+                  mfc=marker_face(branch), mec=c, mew=1.1, zorder=5, gid=f"{branch}-points")
+        handles.append(Line2D([], [], ls="none", marker=BRANCH_MARKERS[branch], ms=4.5,
+                              mfc=marker_face(branch), mec=c, mew=1.1))
+        labels.append(branch)
+    lo = min(float(np.min(measured)), min(iv.lo for iv in ppc.predictive))
+    hi = max(float(np.max(measured)), max(iv.hi for iv in ppc.predictive))
+    pad = 0.08 * (hi - lo if hi > lo else max(abs(hi), 1.0))
+    lim = (max(lo - pad, 0.0) if lo >= 0 else lo - pad, hi + pad)
+    ax_a.plot(lim, lim, color="0.35", lw=0.8, ls="--", zorder=1, gid="identity")
+    handles += [Line2D([], [], color="0.35", lw=0.8, ls="--"),
+                Line2D([], [], color="0.3", lw=0.9),
+                Line2D([], [], color="0.3", lw=3.0, alpha=0.6)]
+    labels += ["y = x", "90% predictive", "90% model curve"]
+    ax_a.set_xlim(lim)
+    ax_a.set_ylim(lim)
+    ax_a.set_xlabel(axis_label(f"measured {amplitude_label}", amplitude_units),
+                    fontsize=LABEL_SIZE)
+    ax_a.set_ylabel(axis_label(f"predicted {amplitude_label}", amplitude_units),
+                    fontsize=LABEL_SIZE)
+    ax_a.set_title("(a) amplitude", fontsize=TITLE_SIZE, loc="left")
+    ax_a.legend(handles, labels, loc="upper left", fontsize=LEGEND_SIZE, frameon=False)
+
+    z = np.asarray(ppc.coeff_z, float)
+    n_rec, n_c = z.shape
+    im = ax_b.imshow(np.clip(z, -Z_CLIP, Z_CLIP), cmap="RdBu_r", vmin=-Z_CLIP, vmax=Z_CLIP,
+                     aspect="auto", interpolation="nearest", gid="coeff-z")
+    ax_b.set_xticks(np.arange(n_c), coefficient_labels(n_c), fontsize=TICK_SIZE - 1)
+    ax_b.set_yticks(np.arange(n_rec), list(ppc.names), fontsize=TICK_SIZE - 1)
+    ax_b.tick_params(length=0)
+    ax_b.set_xticks(np.arange(-0.5, n_c), minor=True)
+    ax_b.set_yticks(np.arange(-0.5, n_rec), minor=True)
+    ax_b.grid(True, which="minor", color="white", linewidth=0.8)
+    ax_b.tick_params(which="minor", length=0)
+    for spine in ax_b.spines.values():
+        spine.set_visible(False)
+    ax_b.set_xlabel("Fourier coefficient of R(θ)", fontsize=LABEL_SIZE)
+    ax_b.set_title("(b) standardised coefficient residuals", fontsize=TITLE_SIZE, loc="left")
+    cbar = fig.colorbar(im, ax=ax_b, extend="both", shrink=0.9, pad=0.02)
+    cbar.set_label(r"$(\Phi - \mathrm{mean}\,\tilde{\Phi})\,/\,\mathrm{sd}\,\tilde{\Phi}$",
+                   fontsize=LABEL_SIZE)
+    cbar.ax.tick_params(labelsize=TICK_SIZE)
+    return fig

@@ -1,0 +1,239 @@
+"""Saving a fit to a folder and loading it back for predictions.
+
+A fit folder holds
+
+* ``summary.json``: μ0, a2 and μ_fold (median and 90% interval), the
+  criticality, the amplitude unit, and every recording's measured and
+  predicted amplitude, plus settings and stage timings;
+* ``posterior.nc``: the posterior draws as ArviZ InferenceData (netCDF), with
+  the replicated Fourier coefficients as the posterior predictive group;
+* ``model.json``: the model structure (:class:`ModelSpec`), enough to predict;
+* ``figures/*.png``.
+
+Every file is written to a staging folder first and moved into place with
+``os.replace``, so an interrupted run never leaves a half-written file, and a
+folder that already holds files is refused unless ``force`` is set.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import bayeshopf
+from bayeshopf.diagnostics import arviz_io
+from bayeshopf.diagnostics.summaries import Interval, interval
+from bayeshopf.errors import DataError, OutputError
+from bayeshopf.model.hybrid import ModelSpec
+
+SUMMARY = "summary.json"
+POSTERIOR = "posterior.nc"
+MODEL = "model.json"
+FIGURES = "figures"
+
+#: Sites stored in ``posterior.nc`` under the posterior predictive group.
+_PREDICTIVE_SITES = ("coeffs_rep",)
+_DROPPED_SITES = ("coeffs_hat",)
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
+    """The ``summary.json`` content of a :class:`~bayeshopf.pipeline.HopfFit`."""
+    ppc = fit.ppc() if ppc is None else ppc
+    fold = fit.interval("mu_fold")
+    recs = []
+    for i, name in enumerate(fit.features.names):
+        recs.append(
+            {
+                "file": name,
+                "mu": float(fit.features.mu[i]),
+                "branch": "unstable" if fit.features.unstable[i] else "stable",
+                "amplitude": float(fit.features.amplitude[i]),
+                "predicted": ppc.predictive[i].to_json(),
+                "curve": ppc.curve[i].to_json(),
+                "inside_ci90": bool(ppc.covered[i]),
+                "frequency_hz": abs(float(fit.features.frequency_hz[i])),
+            }
+        )
+    out = {
+        "mu0": fit.interval("mu0").to_json(),
+        "a2": fit.interval("a2").to_json(),
+        "mu_fold": None if fold is None else fold.to_json(),
+        "criticality": fit.criticality,
+        "mu_label": fit.mu_label,
+        "mu_units": fit.mu_units,
+        "amplitude_units": fit.amplitude_units,
+        "amplitude_definition": "peak-to-peak of z1 over the orbit, from its Fourier "
+        "reconstruction",
+        "planar_channels": list(fit.spec.frame.names),
+        "recordings": recs,
+        "ppc": {
+            "amplitudes_inside_ci90": int(ppc.covered.sum()),
+            "n_recordings": int(ppc.covered.size),
+            "coefficients_inside_ci90": ppc.coeff_coverage,
+        },
+        "map": {k: _finite_or_none(float(np.asarray(fit.map.params[k])))
+                for k in ("mu0", "a2", "mu_fold") if k in fit.map.params},
+        "seed": fit.seed,
+        "settings": dict(fit.settings.__dict__),
+        "n_draws": int(np.shape(fit.samples["mu0"])[0]),
+        "timings_s": {k: round(v, 3) for k, v in fit.timings.items()},
+        "bayeshopf_version": bayeshopf.__version__,
+    }
+    if extra:
+        out.update(extra)
+    return out
+
+
+def check_output_folder(out: str | os.PathLike[str], force: bool) -> Path:
+    """Refuse a non-empty output folder unless ``force``; refuse a file in its place.
+
+    Raises:
+        OutputError: With the folder and what was found.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{out}: expected an output folder; found an existing file")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise OutputError(
+            f"{out}: output folder is not empty; expected a new or empty folder "
+            "(use --force to replace bayeshopf's files in it; other files are kept)"
+        )
+    return out
+
+
+def _write_json(obj, path: Path) -> None:
+    path.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=None,
+             ppc=None, extra_summary: dict | None = None) -> Path:
+    """Write a fit folder atomically.
+
+    Args:
+        fit: The :class:`~bayeshopf.pipeline.HopfFit`.
+        out: The output folder.
+        force: Replace bayeshopf's files in a non-empty folder (others are kept).
+        figures: Optional callable ``figures(folder) -> list[Path]`` that draws
+            the figures into a folder.
+        ppc: The posterior predictive check, if already computed.
+        extra_summary: More keys for ``summary.json``.
+
+    Returns:
+        The output folder.
+    """
+    out = check_output_folder(out, force)
+    parent = out.parent if str(out.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    except OSError as e:
+        raise OutputError(f"{out}: cannot create the output folder ({e.strerror})") from None
+    try:
+        _write_json(summary_dict(fit, ppc, extra_summary), stage / SUMMARY)
+        _write_json(fit.spec.to_dict(), stage / MODEL)
+        samples = {k: v for k, v in fit.samples.items()
+                   if k not in _PREDICTIVE_SITES + _DROPPED_SITES}
+        idata = arviz_io.to_inference_data(
+            samples,
+            predictive={"coeffs": fit.samples["coeffs_rep"]},
+            observed={"coeffs": fit.features.coeffs},
+            constant={"mu": fit.features.mu, "unstable": fit.features.unstable.astype(int),
+                      "coeffs_sd": fit.features.coeffs_sd},
+            attrs={"criticality": fit.criticality, "seed": fit.seed,
+                   "bayeshopf_version": bayeshopf.__version__},
+        )
+        arviz_io.write_netcdf(idata, stage / POSTERIOR)
+        if figures is not None:
+            (stage / FIGURES).mkdir()
+            figures(stage / FIGURES)
+        if not out.exists():
+            os.replace(stage, out)
+        else:
+            for src in sorted(stage.rglob("*")):
+                dst = out / src.relative_to(stage)
+                if src.is_dir():
+                    dst.mkdir(exist_ok=True)
+                else:
+                    os.replace(src, dst)
+    except OSError as e:
+        raise OutputError(f"{out}: cannot write the fit ({e.strerror or e})") from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return out
+
+
+@dataclass(frozen=True)
+class SavedFit:
+    """A fit read back from its folder.
+
+    Attributes:
+        folder: Where it was read from.
+        spec: The model structure.
+        samples: Posterior draws of every site.
+        summary: The content of ``summary.json``.
+    """
+
+    folder: Path
+    spec: ModelSpec
+    samples: dict
+    summary: dict
+
+    def predict(self, mu: float, branch: str = "stable", predictive: bool = False) -> Interval:
+        """Amplitude median and 90% interval at μ on ``branch``.
+
+        Raises:
+            DataError: When the branch does not exist at μ in any posterior draw.
+        """
+        from bayeshopf.pipeline import predict_amplitude
+
+        draws = predict_amplitude(self.samples, self.spec, [mu], branch, predictive)[:, 0]
+        p = float(np.isfinite(draws).mean())
+        if p == 0.0:
+            raise DataError(
+                f"--mu {mu:g}: the {branch} branch does not exist there in any posterior "
+                f"draw (Hopf point μ0 ≈ {np.median(self.samples['mu0']):.4g}"
+                + (f", fold ≈ {self.summary['mu_fold']['median']:.4g}"
+                   if self.summary.get("mu_fold") else "") + ")"
+            )
+        return interval(draws)
+
+    def p_exists(self, mu: float, branch: str = "stable") -> float:
+        """Posterior probability that ``branch`` exists at μ."""
+        from bayeshopf.pipeline import predict_amplitude
+
+        return float(np.isfinite(predict_amplitude(self.samples, self.spec, [mu], branch)).mean())
+
+
+def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
+    """Read a fit folder written by :func:`save_fit`.
+
+    Raises:
+        DataError: When a file is missing or unreadable.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(f"{folder}: expected a fit folder (from 'bayeshopf fit'); not found")
+    for name in (SUMMARY, MODEL, POSTERIOR):
+        if not (folder / name).is_file():
+            raise DataError(f"{folder}: expected {name} in a fit folder; not found")
+    try:
+        summary = json.loads((folder / SUMMARY).read_text())
+        spec = ModelSpec.from_dict(json.loads((folder / MODEL).read_text()))
+    except (ValueError, KeyError, TypeError) as e:
+        raise DataError(f"{folder}: summary.json or model.json is not readable ({e})") from None
+    try:
+        samples, _ = arviz_io.read_posterior(folder / POSTERIOR)
+    except Exception as e:  # netCDF/HDF5 raise many types
+        raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
+    return SavedFit(folder, spec, samples, summary)
