@@ -93,7 +93,7 @@ def default_mu_grid(spec: ModelSpec, samples: dict, n: int = 120) -> np.ndarray:
     if spec.criticality == "subcritical":
         lo = min(lo, float(np.quantile(normal_form.fold_point(samples["mu0"], samples["a2"]),
                                        0.01)))
-    hi = spec.mu_min + spec.mu_span
+    hi = max(spec.mu_min + spec.mu_span, float(np.quantile(samples["mu0"], 0.99)))
     pad = 0.05 * (hi - lo)
     return np.linspace(lo - pad, hi + pad, n)
 

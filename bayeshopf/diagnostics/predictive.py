@@ -164,7 +164,9 @@ def predictive_amplitude_draws(
     sign = jnp.broadcast_to(jnp.asarray(sign, dtype=float), mu.shape)
     n_draws = np.shape(samples["mu0"])[0]
     n_c = fourier.n_coefficients(spec.n_h)
-    eps = jax.random.normal(key, (n_draws, mu.size, n_c))
+    # common random numbers along μ: one replicated recording per draw, so the
+    # band's edges are smooth curves rather than per-μ Monte Carlo noise
+    eps = jnp.broadcast_to(jax.random.normal(key, (n_draws, 1, n_c)), (n_draws, mu.size, n_c))
     sd = jnp.zeros((mu.size, n_c)) if coeffs_sd is None else jnp.asarray(coeffs_sd, float)
     return np.asarray(
         _cached(spec, "predictive", build)(

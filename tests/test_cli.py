@@ -1,0 +1,207 @@
+"""The command line: bad input gives one clear line, a non-zero exit and untouched inputs."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayeshopf.cli.main import main
+from bayeshopf.data import write_interchange
+from bayeshopf.data.synthetic import demo_system
+
+
+def digest(folder: Path) -> dict[str, str]:
+    """Content hash and mtime of every file below ``folder``."""
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        + str(p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def good_data(tmp_path_factory) -> Path:
+    rs, _ = demo_system(seed=3, fast=True)
+    return write_interchange(rs, tmp_path_factory.mktemp("data") / "demo")
+
+
+def _rewrite_csv(folder: Path, transform) -> None:
+    """Apply ``transform(header, table) -> (header, table)`` to the first recording's CSV."""
+    manifest = (folder / "manifest.csv").read_text().splitlines()
+    rows = [r for r in manifest if r and not r.startswith("#")]
+    name = rows[1].split(",")[0]
+    path = folder / name
+    lines = path.read_text().splitlines()
+    header, table = lines[0], np.loadtxt(lines[1:], delimiter=",")
+    header, table = transform(header, table)
+    np.savetxt(path, table, fmt="%.17g", delimiter=",", header=header, comments="")
+
+
+def _missing_column(folder: Path) -> str:
+    def drop(h, t):
+        cols = h.split(",")
+        return ",".join(cols[:2]), t[:, :2]
+
+    _rewrite_csv(folder, drop)
+    return "planar pair"
+
+
+def _nan_samples(folder: Path) -> str:
+    def nan(h, t):
+        t = t.copy()
+        t[10, 1] = np.nan
+        return h, t
+
+    _rewrite_csv(folder, nan)
+    return "nan"
+
+
+def _non_uniform_time(folder: Path) -> str:
+    def jitter(h, t):
+        t = t.copy()
+        t[50:, 0] += 0.5 * (t[1, 0] - t[0, 0])
+        return h, t
+
+    _rewrite_csv(folder, jitter)
+    return "uniform"
+
+
+def _unknown_branch(folder: Path) -> str:
+    m = folder / "manifest.csv"
+    m.write_text(m.read_text().replace(",unstable", ",unstabel", 1))
+    return "unstabel"
+
+
+def _single_recording(folder: Path) -> str:
+    m = folder / "manifest.csv"
+    lines = m.read_text().splitlines()
+    keep = [ln for ln in lines if ln.startswith("#") or ln.startswith("file,")]
+    data = [ln for ln in lines if ln not in keep]
+    m.write_text("\n".join(keep + data[:1]) + "\n")
+    return "two or more distinct"
+
+
+def _unreadable_file(folder: Path) -> str:
+    m = folder / "manifest.csv"
+    rows = [r for r in m.read_text().splitlines() if r and not r.startswith("#")]
+    (folder / rows[1].split(",")[0]).write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00garbage\xff\xfe")
+    return rows[1].split(",")[0]
+
+
+CASES = {
+    "missing column": _missing_column,
+    "NaN samples": _nan_samples,
+    "non-uniform time": _non_uniform_time,
+    "unknown branch label": _unknown_branch,
+    "single recording": _single_recording,
+    "unreadable file": _unreadable_file,
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_bad_input_one_line_error_inputs_untouched(case, good_data, tmp_path, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(good_data, data)
+    needle = CASES[case](data)
+    before = digest(data)
+    out = tmp_path / "out"
+    code = main(["fit", str(data), "--out", str(out), "--fast", "--quiet", "--no-figures"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    assert needle.lower() in err.lower(), err
+    assert digest(data) == before
+    assert not out.exists()
+
+
+def test_missing_data_folder(tmp_path, capsys):
+    code = main(["fit", str(tmp_path / "nope"), "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "nope" in err
+
+
+def test_console_script_no_traceback(good_data, tmp_path):
+    """The installed entry point, in a subprocess: exit code and stderr."""
+    data = tmp_path / "data"
+    shutil.copytree(good_data, data)
+    _nan_samples(data)
+    exe = Path(sys.executable).with_name("bayeshopf")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "bayeshopf.cli.main"]
+    r = subprocess.run(cmd + ["fit", str(data), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_help_everywhere(capsys):
+    for argv in (["--help"], ["demo", "--help"], ["fit", "--help"], ["predict", "--help"]):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 0
+    assert "predict" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def fitted(good_data, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fit") / "out"
+    assert main(["fit", str(good_data), "--out", str(out), "--fast", "--quiet", "--seed", "1"]) == 0
+    return out
+
+
+def test_fit_writes_summary_posterior_figures(fitted, good_data):
+    s = json.loads((fitted / "summary.json").read_text())
+    assert s["criticality"] == "subcritical"
+    for k in ("mu0", "a2", "mu_fold"):
+        lo, hi = s[k]["ci90"]
+        assert lo <= s[k]["median"] <= hi
+    assert s["amplitude_units"] == "m"
+    assert len(s["recordings"]) == 7
+    for r in s["recordings"]:
+        assert set(r) >= {"file", "mu", "branch", "amplitude", "predicted"}
+        assert r["predicted"]["ci90"][0] <= r["predicted"]["median"] <= r["predicted"]["ci90"][1]
+    assert (fitted / "posterior.nc").stat().st_size > 1000
+    pngs = sorted(p.name for p in (fitted / "figures").glob("*.png"))
+    assert pngs == ["bifurcation.png", "phase_portraits.png", "ppc.png"]
+    assert not [p for p in fitted.parent.iterdir() if p.name.startswith(".")]
+
+
+def test_fit_refuses_non_empty_out_without_force(fitted, good_data, capsys):
+    before = digest(fitted)
+    code = main(["fit", str(good_data), "--out", str(fitted), "--fast", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "not empty" in err and "--force" in err
+    assert digest(fitted) == before
+
+
+def test_predict_json_matches_summary(fitted, capsys):
+    s = json.loads((fitted / "summary.json").read_text())
+    rec = s["recordings"][0]
+    assert main(["predict", str(fitted), "--mu", str(rec["mu"]), "--branch", rec["branch"],
+                 "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["mu"] == rec["mu"] and out["branch"] == rec["branch"]
+    lo, hi = out["amplitude"]["ci90"]
+    assert lo <= out["amplitude"]["median"] <= hi
+    # the curve's band at a training μ is the one in the summary
+    assert out["amplitude"]["median"] == pytest.approx(rec["curve"]["median"], rel=1e-6)
+
+
+def test_predict_unstable_beyond_hopf_is_clear_error(fitted, capsys):
+    assert main(["predict", str(fitted), "--mu", "40", "--branch", "unstable"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "does not exist" in err and len(err.splitlines()) == 1
+
+
+def test_predict_missing_fit_folder(tmp_path, capsys):
+    assert main(["predict", str(tmp_path), "--mu", "17"]) == 2
+    assert "summary.json" in capsys.readouterr().err

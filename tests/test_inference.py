@@ -1,0 +1,87 @@
+"""MAP and SVI against parameters planted in synthetic recordings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayeshopf.data.synthetic import demo_system
+from bayeshopf.model.hybrid import params_from_sites
+from bayeshopf.pipeline import FitSettings, fit
+
+
+@pytest.fixture(scope="module")
+def planted():
+    return demo_system(seed=11, fast=True)
+
+
+@pytest.fixture(scope="module")
+def result(planted):
+    rs, _ = planted
+    return fit(rs, "subcritical", seed=0, settings=FitSettings(), progress=False)
+
+
+def test_map_recovers_mu0_a2(result, planted):
+    _, truth = planted
+    p = result.map.params
+    assert abs(float(p["mu0"]) - truth.mu0) < 0.05
+    assert abs(float(p["a2"]) - truth.a2) < 0.05
+    assert abs(float(p["mu_fold"]) - truth.mu_fold) < 0.05
+
+
+def test_map_recovers_linear_map(result, planted):
+    """T_L in physical units, up to the normal form's phase (a rotation of u).
+
+    The model's linear part maps u to the frame, ``z = c + L (T_L u + …)``, so
+    its physical 2×2 block is ``L T_L``; any rotation of u fits equally well,
+    so the rotation-invariant Gram matrix ``M Mᵀ`` is compared.
+    """
+    _, truth = planted
+    p = params_from_sites(result.map.params, result.spec)
+    mu_c = result.spec.mu_centre
+    M = result.spec.frame.L @ (np.asarray(p.T_L)[:, :2]
+                               + result.spec.mu_tilde(mu_c) * np.asarray(p.T_L1))
+    G, G_true = M @ M.T, truth.T_L @ truth.T_L.T
+    np.testing.assert_allclose(np.sqrt(np.abs(G)), np.sqrt(np.abs(G_true)),
+                               rtol=0.1, atol=0.05 * np.sqrt(np.abs(G_true)).max())
+
+
+def test_svi_intervals_cover_planted_values(result, planted):
+    _, truth = planted
+    for name, value in (("mu0", truth.mu0), ("a2", truth.a2), ("mu_fold", truth.mu_fold)):
+        iv = result.interval(name)
+        assert iv.contains(value), f"{name}: {iv} misses {value}"
+        assert iv.width < 0.1 * abs(value), f"{name}: interval {iv} uninformative"
+
+
+def test_posterior_predictive_covers_training_amplitudes(result):
+    ppc = result.ppc()
+    assert ppc.covered.all(), list(zip(ppc.measured, ppc.predictive))
+    assert ppc.coeff_coverage > 0.8
+
+
+def test_curve_band_covers_true_diagram(result, planted):
+    _, truth = planted
+    d = result.diagram()
+    for band, branch in ((d.stable, "stable"), (d.unstable, "unstable")):
+        true = truth.amplitude(band.mu, branch)
+        ok = np.isfinite(true) & np.isfinite(band.quantiles[0])
+        inside = (band.quantiles[0][ok] <= true[ok]) & (true[ok] <= band.quantiles[-1][ok])
+        assert inside.mean() > 0.85, f"{branch}: truth inside the 90% band at {inside.mean():.0%}"
+    assert d.mu0.contains(truth.mu0) and d.mu_fold.contains(truth.mu_fold)
+
+
+def test_reproducible_from_seed(planted):
+    rs, _ = planted
+    a = fit(rs, "subcritical", seed=5, settings=FitSettings.fast(), progress=False)
+    b = fit(rs, "subcritical", seed=5, settings=FitSettings.fast(), progress=False)
+    np.testing.assert_array_equal(a.samples["mu0"], b.samples["mu0"])
+    np.testing.assert_array_equal(a.map.losses, b.map.losses)
+
+
+def test_supercritical_refuses_unstable_recordings(planted):
+    from bayeshopf.errors import FitError
+
+    rs, _ = planted
+    with pytest.raises(FitError, match="unstable"):
+        fit(rs, "supercritical", settings=FitSettings.fast(), progress=False)
