@@ -22,7 +22,8 @@ import math
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,7 @@ from bayeshopf.diagnostics import arviz_io
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import DataError, OutputError
 from bayeshopf.model.hybrid import ModelSpec
+from bayeshopf.pipeline import predict_amplitude
 
 SUMMARY = "summary.json"
 POSTERIOR = "posterior.nc"
@@ -125,7 +127,7 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
         out: The output folder.
         force: Replace bayeshopf's files in a non-empty folder (others are kept).
         figures: Optional callable ``figures(folder) -> list[Path]`` that draws
-            the figures into a folder.
+            the figures into a folder (its time is recorded in the summary).
         ppc: The posterior predictive check, if already computed.
         extra_summary: More keys for ``summary.json``.
 
@@ -140,6 +142,13 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
     except OSError as e:
         raise OutputError(f"{out}: cannot create the output folder ({e.strerror})") from None
     try:
+        timings = {}
+        if figures is not None:
+            (stage / FIGURES).mkdir()
+            t0 = time.perf_counter()
+            figures(stage / FIGURES)
+            timings["figures"] = time.perf_counter() - t0
+        fit = replace(fit, timings={**fit.timings, **timings})
         _write_json(summary_dict(fit, ppc, extra_summary), stage / SUMMARY)
         _write_json(fit.spec.to_dict(), stage / MODEL)
         samples = {k: v for k, v in fit.samples.items()
@@ -154,9 +163,6 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
                    "bayeshopf_version": bayeshopf.__version__},
         )
         arviz_io.write_netcdf(idata, stage / POSTERIOR)
-        if figures is not None:
-            (stage / FIGURES).mkdir()
-            figures(stage / FIGURES)
         if not out.exists():
             os.replace(stage, out)
         else:
@@ -195,8 +201,6 @@ class SavedFit:
         Raises:
             DataError: When the branch does not exist at μ in any posterior draw.
         """
-        from bayeshopf.pipeline import predict_amplitude
-
         draws = predict_amplitude(self.samples, self.spec, [mu], branch, predictive)[:, 0]
         p = float(np.isfinite(draws).mean())
         if p == 0.0:
@@ -210,8 +214,6 @@ class SavedFit:
 
     def p_exists(self, mu: float, branch: str = "stable") -> float:
         """Posterior probability that ``branch`` exists at μ."""
-        from bayeshopf.pipeline import predict_amplitude
-
         return float(np.isfinite(predict_amplitude(self.samples, self.spec, [mu], branch)).mean())
 
 

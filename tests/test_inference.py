@@ -56,7 +56,7 @@ def test_svi_intervals_cover_planted_values(result, planted):
 
 def test_posterior_predictive_covers_training_amplitudes(result):
     ppc = result.ppc()
-    assert ppc.covered.all(), list(zip(ppc.measured, ppc.predictive))
+    assert ppc.covered.all(), list(zip(ppc.measured, ppc.predictive, strict=False))
     assert ppc.coeff_coverage > 0.8
 
 

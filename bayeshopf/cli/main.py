@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 import traceback
@@ -126,21 +125,11 @@ def _run_fit(rs, criticality, args, out, truth=None, extra=None):
         from bayeshopf.plotting import plot_all
 
         def figures(folder):
-            t = time.perf_counter()
-            paths = plot_all(result, rs, folder, truth=truth)
-            timings["figures"] = time.perf_counter() - t
-            return paths
+            return plot_all(result, rs, folder, truth=truth, zoom=truth is not None)
 
-    timings: dict = {}
-    report.save_fit(result, out, force=args.force, figures=figures, ppc=ppc,
-                    extra_summary={**(extra or {}), "total_s": time.perf_counter() - t0})
+    report.save_fit(result, out, force=args.force, figures=figures, ppc=ppc, extra_summary=extra)
     summary = json.loads((Path(out) / report.SUMMARY).read_text())
-    if timings:  # figure time is known only after drawing; record it
-        summary["timings_s"]["figures"] = round(timings["figures"], 3)
-        summary["total_s"] = time.perf_counter() - t0
-        tmp = Path(out) / f".{report.SUMMARY}.tmp"
-        tmp.write_text(json.dumps(summary, indent=2) + "\n")
-        os.replace(tmp, Path(out) / report.SUMMARY)
+    summary["total_s"] = time.perf_counter() - t0
     return summary
 
 

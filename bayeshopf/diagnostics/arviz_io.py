@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import os
 import tempfile
-from pathlib import Path
-
 import warnings
+from pathlib import Path
 
 import numpy as np
 

@@ -80,8 +80,13 @@ def _quantiles(amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 N_PREDICTIVE_DRAWS = 300
 
 
+#: Draws used for the curve bands (5%–95% quantiles are stable with 500).
+N_CURVE_DRAWS = 500
+
+
 def _band(samples, spec, mu, sign, key) -> BranchBand:
-    q, p = _quantiles(amplitude_draws(samples, spec, mu, sign))
+    some = {k: np.asarray(v)[:N_CURVE_DRAWS] for k, v in samples.items()}
+    q, p = _quantiles(amplitude_draws(some, spec, mu, sign))
     few = {k: np.asarray(v)[:N_PREDICTIVE_DRAWS] for k, v in samples.items()}
     qp, _ = _quantiles(predictive_amplitude_draws(few, spec, mu, sign, key))
     return BranchBand(int(sign), mu, q, p, qp)

@@ -43,7 +43,8 @@ class PosteriorPredictiveCheck:
     @property
     def covered(self) -> np.ndarray:
         """Whether each measured amplitude lies in its 90% predictive interval."""
-        return np.array([iv.contains(a) for iv, a in zip(self.predictive, self.measured)])
+        pairs = zip(self.predictive, self.measured, strict=True)
+        return np.array([iv.contains(a) for iv, a in pairs])
 
     @property
     def coeff_coverage(self) -> float:

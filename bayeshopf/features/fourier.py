@@ -1,4 +1,4 @@
-"""Truncated Fourier series of closed curves in polar form (paper eqs. FS, Galerkin).
+r"""Truncated Fourier series of closed curves in polar form (paper eqs. FS, Galerkin).
 
 A closed curve that winds once round the origin is written ``R(θ)`` and projected
 by least squares onto
@@ -18,7 +18,7 @@ import numpy as np
 
 
 def _xp(*arrays):
-    """numpy for numpy inputs (the data path), jax.numpy otherwise (the model path)."""
+    """Numpy for numpy inputs (the data path), jax.numpy otherwise (the model path)."""
     return np if all(isinstance(a, np.ndarray | float | int) for a in arrays) else jnp
 
 
@@ -35,7 +35,7 @@ def design_matrix(theta, n_h: int):
 
 
 def polar(w):
-    """Polar form ``(R, θ)`` about the origin of points ``w`` of shape ``(..., 2)`` (eq. R_theta)."""
+    """Polar form ``(R, θ)`` about the origin of points ``w``, shape ``(..., 2)`` (eq. R_theta)."""
     xp = _xp(w)
     return xp.hypot(w[..., 0], w[..., 1]), xp.arctan2(w[..., 1], w[..., 0])
 

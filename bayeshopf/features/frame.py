@@ -1,4 +1,4 @@
-"""The common planar frame in which orbits are put in polar form.
+r"""The common planar frame in which orbits are put in polar form.
 
 The paper writes every orbit in polar form about the origin of the measured
 (z1, z2) plane, ``R = |z|, θ = atan2(z2, z1)`` (eq. R_theta). Raw channels have

@@ -93,7 +93,8 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
     for g1, g2 in itertools.product([0.03, 0.1, 0.3, 1.0], repeat=2):
         scale2 = 2.0 * np.sqrt(span) if spec.criticality == "supercritical" else span
         x0 = np.array([np.log(g1 * span), np.log(g2 * scale2), 0.0])
-        r0 = np.asarray(normal_form.lco_radius(features.mu, *_normal_form_from_gaps(spec, x0), sign))
+        nf = _normal_form_from_gaps(spec, x0)
+        r0 = np.asarray(normal_form.lco_radius(features.mu, *nf, sign))
         x0[2] = np.mean(np.log(a0) - np.log(r0))
         sol = least_squares(resid, x0, method="lm")
         if best is None or sol.cost < best.cost:

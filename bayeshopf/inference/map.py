@@ -81,7 +81,8 @@ def fit_map(
         return (optax.apply_updates(z, updates), state), loss
 
     (z, _), l2 = run_chunked(
-        lbfgs_step, (z, lbfgs.init(z)), lbfgs_steps, desc="MAP (L-BFGS)", progress=progress, chunk=50
+        lbfgs_step, (z, lbfgs.init(z)), lbfgs_steps,
+        desc="MAP (L-BFGS)", progress=progress, chunk=50,
     )
     g = jax.grad(potential)(z)
     gnorm = float(optax.tree.norm(g)) if hasattr(optax, "tree") else float(

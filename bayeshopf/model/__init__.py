@@ -1,0 +1,1 @@
+"""The model: normal form, coordinate map U12, their composition, and the NumPyro model."""

@@ -1,4 +1,4 @@
-"""The learnt map from normal-form to measured coordinates (paper eq. g).
+r"""The learnt map from normal-form to measured coordinates (paper eq. g).
 
 .. math::
 

@@ -1,4 +1,4 @@
-"""The mechanistic part: the Hopf normal form with a quintic term (paper eq. NF-model-polar).
+r"""The mechanistic part: the Hopf normal form with a quintic term (paper eq. NF-model-polar).
 
 .. math::
 
