@@ -54,12 +54,21 @@ STAGES = (
     ("map", "MAP"),
     ("svi", "SVI"),
     ("predictive", "predictive (ppc + diagram)"),
+    ("ppc", "&nbsp;&nbsp;of which ppc"),
+    ("diagram", "&nbsp;&nbsp;of which diagram"),
     ("figures", "figures (plot_all)"),
     ("total", "total in process"),
 )
 
 
 # -- the measured child process ---------------------------------------------------------
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process so far (MB; ``ru_maxrss`` is KiB on Linux)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def worker(dataset: str, data: str | None, fast: bool, seed: int) -> dict:
@@ -71,6 +80,7 @@ def worker(dataset: str, data: str | None, fast: bool, seed: int) -> dict:
     from bayeshopf.plotting import diagram_grid, plot_all
 
     t = {"import": time.perf_counter() - t0}
+    rss = {"import": peak_rss_mb()}
     t1 = time.perf_counter()
     truth = None
     if dataset == "flutter_cbc":
@@ -78,21 +88,30 @@ def worker(dataset: str, data: str | None, fast: bool, seed: int) -> dict:
     else:
         rs, truth = demo_system(seed=seed, fast=fast)
     t["load"] = time.perf_counter() - t1
+    rss["load"] = peak_rss_mb()
 
     settings = FitSettings.fast() if fast else FitSettings()
     result = fit(rs, "subcritical", seed=seed, settings=settings, progress=False)
     t.update({k: result.timings[k] for k in ("features", "map", "svi")})
+    rss["svi"] = peak_rss_mb()
 
     t1 = time.perf_counter()
     ppc = result.ppc()
+    t["ppc"] = time.perf_counter() - t1
+    rss["ppc"] = peak_rss_mb()
+    t2 = time.perf_counter()
     result.diagram(diagram_grid(result))
+    t["diagram"] = time.perf_counter() - t2
+    rss["diagram"] = peak_rss_mb()
     t["predictive"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench-fig-") as tmp:
         plot_all(result, rs, tmp, truth=truth)
     t["figures"] = time.perf_counter() - t1
+    rss["figures"] = peak_rss_mb()
     t["total"] = time.perf_counter() - t0
+    t["rss"] = rss
     iv = result.interval("mu0")
     t["check"] = {
         "n_recordings": len(rs),
@@ -108,7 +127,7 @@ def worker(dataset: str, data: str | None, fast: bool, seed: int) -> dict:
 def run_child(cmd: list[str], env: dict, cwd: Path) -> dict:
     """Run ``cmd`` to completion; wall clock, exit code, peak RSS and output."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        load = os.getloadavg()[0]
+        loadavg = os.getloadavg()[0]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=out, stderr=err, text=True)
         _, status, usage = os.wait4(proc.pid, 0)
@@ -120,7 +139,7 @@ def run_child(cmd: list[str], env: dict, cwd: Path) -> dict:
             "rc": proc.returncode,
             "wall": wall,
             "rss_mb": usage.ru_maxrss / 1024.0,  # KiB on Linux
-            "load": load,
+            "loadavg": loadavg,
             "stdout": out.read(),
             "stderr": err.read(),
         }
@@ -155,7 +174,7 @@ def bench_stages(dataset: str, data: str | None, fast: bool, seed: int, scratch:
             _fail(f"{dataset} ({mode})", res)
         line = [ln for ln in res["stdout"].splitlines() if ln.startswith(MARK)][-1]
         out[mode] = {**json.loads(line[len(MARK):]), "wall": res["wall"],
-                     "rss_mb": res["rss_mb"], "load": res["load"]}
+                     "rss_mb": res["rss_mb"], "loadavg": res["loadavg"]}
         print(f"    {res['wall']:.1f} s wall, {res['rss_mb']:.0f} MB peak RSS", flush=True)
     out["cache_mb"] = sum(f.stat().st_size for f in cache.rglob("*") if f.is_file()) / 2**20
     return out
@@ -182,7 +201,7 @@ def bench_cli(args_: list[str], label: str, fast: bool, scratch: Path) -> dict:
         if res["rc"] != 0:
             _fail(f"{label} ({mode})", res)
         summary = json.loads((dest / "summary.json").read_text())
-        out[mode] = {"wall": res["wall"], "rss_mb": res["rss_mb"], "load": res["load"],
+        out[mode] = {"wall": res["wall"], "rss_mb": res["rss_mb"], "loadavg": res["loadavg"],
                      "timings": summary.get("timings_s", {})}
         print(f"    {res['wall']:.1f} s wall, {res['rss_mb']:.0f} MB peak RSS", flush=True)
     return out
@@ -229,11 +248,22 @@ def render(stages: dict, cli: dict, meta: dict) -> str:
     extra = [
         ("process wall clock", lambda r: _fmt(r["wall"], 2)),
         ("peak RSS (MB)", lambda r: _fmt(r["rss_mb"], 0)),
-        ("load average at start", lambda r: _fmt(r["load"], 2)),
+        ("1-min load average at start", lambda r: _fmt(r["loadavg"], 2)),
     ]
     for label, f in extra:
         cells = [f(stages[n][m]) for n in names for m in ("cold", "warm")]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "Peak RSS of the process (MB) after each stage (`ru_maxrss`, so it only grows; "
+        "`SVI` covers the whole of `fit`):",
+        "",
+        "| after | " + " | ".join(f"{n} cold | {n} warm" for n in names) + " |",
+        "|---|" + "---:|" * (2 * len(names)),
+    ]
+    for key in ("import", "load", "svi", "ppc", "diagram", "figures"):
+        cells = [_fmt(stages[n][m]["rss"].get(key), 0) for n in names for m in ("cold", "warm")]
+        lines.append(f"| {dict(STAGES)[key]} | " + " | ".join(cells) + " |")
     lines.append("")
     for n in names:
         c = stages[n]["warm"]["check"]
@@ -257,7 +287,7 @@ def render(stages: dict, cli: dict, meta: dict) -> str:
             lines.append(
                 f"| `{label}` | {_fmt(r['cold']['wall'], 2)} | {_fmt(r['warm']['wall'], 2)} | "
                 f"{_fmt(r['cold']['rss_mb'], 0)} | {_fmt(r['warm']['rss_mb'], 0)} | "
-                f"{_fmt(r['cold']['load'], 2)} / {_fmt(r['warm']['load'], 2)} |"
+                f"{_fmt(r['cold']['loadavg'], 2)} / {_fmt(r['warm']['loadavg'], 2)} |"
             )
         lines += ["", "Stage timings the console script recorded in `summary.json` "
                   "(s, cold / warm):", ""]
@@ -334,6 +364,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import bayeshopf
 
+    started = dt.datetime.now().astimezone()
     stages, cli = {}, {}
     with tempfile.TemporaryDirectory(prefix="bayeshopf-bench-") as tmp:
         scratch = Path(tmp)
@@ -351,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
                                                   "bayeshopf demo", args.fast, scratch)
 
     meta = {
-        "date": dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"),
+        "date": f"{started:%Y-%m-%d %H:%M} to {dt.datetime.now().astimezone():%H:%M %Z}",
         "nproc": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
         else os.cpu_count(),
         "cpu": cpu_model(),

@@ -39,7 +39,7 @@ __all__ = [
 FIGURE_NAMES = ("bifurcation.png", "phase_portraits.png", "ppc.png")
 
 
-def diagram_grid(fit, n: int = 160, n_refine: int = 40) -> np.ndarray:
+def diagram_grid(fit, n: int = 100, n_refine: int = 25) -> np.ndarray:
     """μ grid for the diagram of ``fit``, refined about the Hopf and fold points.
 
     The amplitude has a square-root singularity at the Hopf point and at the

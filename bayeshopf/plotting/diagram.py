@@ -279,7 +279,7 @@ def plot_bifurcation(
     amplitude_units: str = "",
     amplitude_label: str | None = None,
     truth: AmplitudeTruth | None = None,
-    min_p_exists: float = 0.05,
+    min_p_exists: float = 0.5,
     legend: bool = True,
     zoom: tuple[float, float] | None = None,
     zoom_bounds: tuple[float, float, float, float] | str = "auto",
@@ -290,9 +290,11 @@ def plot_bifurcation(
     Each branch is drawn in its own colour (stable C0, unstable C3): its
     posterior median as a line (solid stable, dashed unstable), its 50% credible
     band darker and 90% band lighter, and the 90% posterior predictive band of a
-    new recording (curve uncertainty plus scatter) as thin dotted lines. The
-    unstable branch is drawn only where it exists in at least ``min_p_exists``
-    of the draws. The Hopf point is marked at amplitude zero and the fold at its
+    new recording (curve uncertainty plus scatter) as thin dotted lines. A
+    branch is drawn only where it exists in at least ``min_p_exists`` of the
+    draws (by default half, so the branches end at the median Hopf and fold
+    points, whose uncertainty the error bars show); the quantiles there are
+    over the draws in which it exists. The Hopf point is marked at amplitude zero and the fold at its
     amplitude, each with its 90% interval as error bars. The y range follows the
     credible bands and the data; predictive quantiles beyond it are clipped.
 

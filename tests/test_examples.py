@@ -1,0 +1,108 @@
+"""The quick-start example script and notebook run end to end (in their fast mode)."""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bayeshopf.plotting import FIGURE_NAMES
+
+REPO = Path(__file__).resolve().parent.parent
+QUICKSTART = REPO / "examples" / "quickstart.py"
+NOTEBOOK = REPO / "notebooks" / "01_quickstart.ipynb"
+#: Generous: a cold JAX compilation cache on a slow machine.
+TIMEOUT_S = 1200
+
+TRUTH = {"mu0": 18.0, "a2": 3.4, "mu_fold": 15.11}
+NUMBER = r"(-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?)"
+INTERVAL_LINE = re.compile(
+    rf"^(mu0|a2|mu_fold)\s+{NUMBER}\s+\[\s*{NUMBER},\s*{NUMBER}\]\s+{NUMBER}\s+(yes|NO)\s*$",
+    re.MULTILINE,
+)
+
+
+def _fast_env() -> dict:
+    env = dict(os.environ)
+    env["BAYESHOPF_FAST"] = "1"
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+@pytest.mark.notebooks
+def test_quickstart_script_runs_and_writes_figures(tmp_path):
+    out = tmp_path / "figures"
+    proc = subprocess.run(
+        [sys.executable, str(QUICKSTART), str(out)],
+        cwd=tmp_path, env=_fast_env(), capture_output=True, text=True, timeout=TIMEOUT_S,
+    )
+    assert proc.returncode == 0, f"stdout:\n{proc.stdout[-3000:]}\nstderr:\n{proc.stderr[-3000:]}"
+
+    for name in FIGURE_NAMES:
+        path = out / name
+        assert path.is_file(), f"{name} not written; found {sorted(os.listdir(out))}"
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    rows = {m[0]: [float(x) for x in m[1:5]] for m in INTERVAL_LINE.findall(proc.stdout)}
+    assert set(rows) == set(TRUTH), proc.stdout
+    for name, (median, lo, hi, true) in rows.items():
+        assert all(math.isfinite(v) for v in (median, lo, hi)), (name, proc.stdout)
+        assert lo <= median <= hi, (name, proc.stdout)
+        assert true == pytest.approx(TRUTH[name], abs=0.01)
+        # fast settings are less converged; the estimate must still be close
+        assert median == pytest.approx(TRUTH[name], rel=0.05), (name, proc.stdout)
+
+    assert "fast settings" in proc.stdout
+    assert "amplitude at airspeed = 17" in proc.stdout
+    for branch in ("stable", "unstable"):
+        assert re.search(rf"^\s+{branch}\s+{NUMBER}\s+90% \[", proc.stdout, re.MULTILINE), (
+            branch, proc.stdout)
+
+
+@pytest.mark.notebooks
+def test_quickstart_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+
+    copy = tmp_path / NOTEBOOK.name  # never execute (or overwrite) the stored notebook
+    shutil.copyfile(NOTEBOOK, copy)
+    nb = nbformat.read(copy, as_version=4)
+    monkeypatch.setenv("BAYESHOPF_FAST", "1")  # inherited by the kernel
+    monkeypatch.delenv("MPLBACKEND", raising=False)  # the notebook selects inline itself
+    client = nbclient.NotebookClient(
+        nb, timeout=TIMEOUT_S, kernel_name="python3",
+        resources={"metadata": {"path": str(tmp_path)}},
+    )
+    client.execute()  # raises CellExecutionError on the first failing cell
+
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+              if o.output_type == "error"]
+    assert not errors, errors
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
+                   for o in c.get("outputs", []) if o.output_type == "stream")
+    assert "fast mode: True" in text
+    n_images = sum("image/png" in o.get("data", {}) for c in nb.cells if c.cell_type == "code"
+                   for o in c.get("outputs", []))
+    assert n_images >= 5
+    nbformat.write(nb, copy)  # the executed copy, for inspection after a failure
+
+
+@pytest.mark.notebooks
+def test_stored_notebook_has_outputs_of_a_full_run():
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert 'FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"' in code[0].source
+    outputs = [o for c in code for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 5
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: False" in text, "stored outputs must come from a default-settings run"
