@@ -188,6 +188,9 @@ def main(argv: list[str] | None = None) -> int:
     from bayeshopf.errors import BayesHopfError
 
     try:
+        from bayeshopf.inference.cache import enable_compilation_cache
+
+        enable_compilation_cache()  # before any JAX work, so every compilation is cached
         return COMMANDS[args.command](args)
     except BayesHopfError as e:
         print(f"bayeshopf {args.command}: error: {e}", file=sys.stderr)

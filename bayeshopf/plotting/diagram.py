@@ -294,9 +294,10 @@ def plot_bifurcation(
     branch is drawn only where it exists in at least ``min_p_exists`` of the
     draws (by default half, so the branches end at the median Hopf and fold
     points, whose uncertainty the error bars show); the quantiles there are
-    over the draws in which it exists. The Hopf point is marked at amplitude zero and the fold at its
-    amplitude, each with its 90% interval as error bars. The y range follows the
-    credible bands and the data; predictive quantiles beyond it are clipped.
+    over the draws in which it exists. The Hopf point is marked at amplitude
+    zero and the fold at its amplitude, each with its 90% interval as error
+    bars. The y range follows the credible bands and the data; predictive
+    quantiles beyond it are clipped.
 
     Args:
         diagram: The posterior diagram (:meth:`HopfFit.diagram`).
