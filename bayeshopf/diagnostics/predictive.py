@@ -17,8 +17,6 @@ from bayeshopf.model import hybrid, normal_form
 from bayeshopf.model.hybrid import ModelSpec
 from bayeshopf.model.probabilistic import harmonic_scatter
 
-_JITTED: dict[tuple[int, str], tuple] = {}
-
 
 def _site_arrays(samples: dict, spec: ModelSpec) -> dict:
     keys = ["mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_s", "nn_scale"]
@@ -27,16 +25,6 @@ def _site_arrays(samples: dict, spec: ModelSpec) -> dict:
     if missing:
         raise KeyError(f"posterior draws lack the site(s) {', '.join(missing)}")
     return {k: jnp.asarray(samples[k]) for k in keys}
-
-
-def _cached(spec: ModelSpec, kind: str, build):
-    hit = _JITTED.get((id(spec), kind))
-    if hit is None or hit[0] is not spec:
-        if len(_JITTED) > 64:
-            _JITTED.clear()
-        hit = (spec, jax.jit(build()))
-        _JITTED[(id(spec), kind)] = hit
-    return hit[1]
 
 
 def amplitude_draws(samples: dict, spec: ModelSpec, mu, sign) -> np.ndarray:
@@ -64,7 +52,8 @@ def amplitude_draws(samples: dict, spec: ModelSpec, mu, sign) -> np.ndarray:
 
     mu = jnp.atleast_1d(jnp.asarray(mu, dtype=float))
     sign = jnp.broadcast_to(jnp.asarray(sign, dtype=float), mu.shape)
-    return np.asarray(_cached(spec, "amplitude", build)(_site_arrays(samples, spec), mu, sign))
+    f = hybrid.jit_for_spec(spec, "amplitude", build)
+    return np.asarray(f(_site_arrays(samples, spec), mu, sign))
 
 
 def orbit_draws(samples: dict, spec: ModelSpec, mu: float, sign: float) -> np.ndarray:
@@ -78,10 +67,9 @@ def orbit_draws(samples: dict, spec: ModelSpec, mu: float, sign: float) -> np.nd
 
         return f
 
-    return np.asarray(
-        _cached(spec, "orbit", build)(_site_arrays(samples, spec), jnp.asarray(mu, float),
-                                      jnp.asarray(sign, float))
-    )
+    f = hybrid.jit_for_spec(spec, "orbit", build)
+    return np.asarray(f(_site_arrays(samples, spec), jnp.asarray(mu, float),
+                        jnp.asarray(sign, float)))
 
 
 def fold_amplitude_draws(samples: dict, spec: ModelSpec) -> np.ndarray:
@@ -105,10 +93,9 @@ def _diag_amplitude(samples: dict, spec: ModelSpec, mu_per_draw, sign) -> np.nda
 
         return f
 
-    return np.asarray(
-        _cached(spec, "diag", build)(_site_arrays(samples, spec),
-                                     jnp.asarray(mu_per_draw, float), jnp.asarray(sign, float))
-    )
+    f = hybrid.jit_for_spec(spec, "diag", build)
+    return np.asarray(f(_site_arrays(samples, spec), jnp.asarray(mu_per_draw, float),
+                        jnp.asarray(sign, float)))
 
 
 def _encircles_origin(w):
@@ -169,7 +156,7 @@ def predictive_amplitude_draws(
     eps = jnp.broadcast_to(jax.random.normal(key, (n_draws, 1, n_c)), (n_draws, mu.size, n_c))
     sd = jnp.zeros((mu.size, n_c)) if coeffs_sd is None else jnp.asarray(coeffs_sd, float)
     return np.asarray(
-        _cached(spec, "predictive", build)(
+        hybrid.jit_for_spec(spec, "predictive", build)(
             _site_arrays(samples, spec), jnp.asarray(samples["sigma"]), mu, sign, eps, sd
         )
     )

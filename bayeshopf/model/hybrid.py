@@ -160,6 +160,24 @@ def amplitude(params: HopfParams, mu, sign, spec: ModelSpec):
     return jnp.max(z1, axis=-1) - jnp.min(z1, axis=-1)
 
 
+_SPEC_JITS: dict[tuple[int, str], tuple] = {}
+
+
+def jit_for_spec(spec: ModelSpec, kind: str, build):
+    """``jax.jit(build())``, compiled once per (spec, kind) and cached.
+
+    A :class:`ModelSpec` holds arrays and is not hashable, so it cannot be a
+    static argument; the cache is keyed on its identity and keeps it alive.
+    """
+    hit = _SPEC_JITS.get((id(spec), kind))
+    if hit is None or hit[0] is not spec:
+        if len(_SPEC_JITS) > 64:
+            _SPEC_JITS.clear()
+        hit = (spec, jax.jit(build()))
+        _SPEC_JITS[(id(spec), kind)] = hit
+    return hit[1]
+
+
 def branch_signs(unstable) -> np.ndarray:
     """Closed-form branch signs (+1 stable, −1 unstable) from a boolean mask."""
     return np.where(np.asarray(unstable), normal_form.UNSTABLE, normal_form.STABLE)

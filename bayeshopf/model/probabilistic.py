@@ -61,27 +61,21 @@ def _normal_form_sites(spec: ModelSpec):
     return mu0, a2
 
 
-_PREDICTORS: dict[int, tuple] = {}
-
-
 def _batched_prediction(spec: ModelSpec):
     """Jitted ``(sites, μ, sign) ↦ Φ(R̂_i)`` for all recordings, cached per spec.
 
     Jitting the whole prediction makes NumPyro's eager model traces (at
     initialisation) one compiled call instead of hundreds of op-by-op dispatches.
     """
-    hit = _PREDICTORS.get(id(spec))
-    if hit is None or hit[0] is not spec:
 
+    def build():
         def predict(sites, mu, sign):
             params = hybrid.params_from_sites(sites, spec)
             return jax.vmap(lambda m, s: hybrid.predicted_coeffs(params, m, s, spec))(mu, sign)
 
-        hit = (spec, jax.jit(predict))
-        if len(_PREDICTORS) > 32:
-            _PREDICTORS.clear()
-        _PREDICTORS[id(spec)] = hit
-    return hit[1]
+        return predict
+
+    return hybrid.jit_for_spec(spec, "coeffs", build)
 
 
 def harmonic_scatter(sigma):
