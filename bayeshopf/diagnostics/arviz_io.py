@@ -78,11 +78,6 @@ def read_posterior(path: str | os.PathLike[str]) -> tuple[dict, dict]:
     return samples, dict(post.attrs)
 
 
-def ess_bulk(draws) -> float:
-    """ArviZ's bulk effective sample size of 1-D draws of one chain."""
-    return float(az.ess(np.asarray(draws)[None]))
-
-
 def loo(log_lik) -> dict:
     """PSIS-LOO of pointwise log-likelihoods ``(n_draws, n_obs)`` (one chain).
 

@@ -7,6 +7,7 @@ from scipy.stats import norm
 
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.features.orbits import OrbitFeatures
+from bayeshopf.model.probabilistic import harmonic_scatter
 
 
 def pointwise_log_likelihood(samples: dict, features: OrbitFeatures) -> np.ndarray:
@@ -15,8 +16,7 @@ def pointwise_log_likelihood(samples: dict, features: OrbitFeatures) -> np.ndarr
     The likelihood of the model: ``Φ(R_i) ~ N(Φ(R̂_i), √(σ_k² + s_i²))``, summed
     over the coefficients of recording i.
     """
-    sigma = np.asarray(samples["sigma"])
-    per_coeff = np.concatenate([sigma[:, :1], sigma[:, 1:], sigma[:, 1:]], axis=1)
+    per_coeff = np.asarray(harmonic_scatter(np.asarray(samples["sigma"])))
     scale = np.sqrt(per_coeff[:, None, :] ** 2 + features.coeffs_sd[None] ** 2)
     lp = norm.logpdf(features.coeffs[None], loc=np.asarray(samples["coeffs_hat"]), scale=scale)
     return lp.sum(axis=-1)
