@@ -14,6 +14,8 @@ import time
 import traceback
 from pathlib import Path
 
+from bayeshopf.cli import simulate as _simulate
+
 EXIT_USAGE = 2
 EXIT_ERROR = 1
 
@@ -68,6 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--predictive", action="store_true",
                    help="band of a new measurement (adds the scatter σ) instead of the curve")
     p.add_argument("--json", action="store_true", help="print JSON")
+
+    _simulate.add_parser(sub)
     return ap
 
 
@@ -179,7 +183,7 @@ def cmd_predict(args) -> int:
     return 0
 
 
-COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict}
+COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict, "simulate": _simulate.run}
 
 
 def main(argv: list[str] | None = None) -> int:

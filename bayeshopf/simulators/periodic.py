@@ -1,0 +1,290 @@
+r"""Periodic orbits by single shooting, with their Floquet multipliers.
+
+A periodic orbit of period :math:`T` through :math:`x_0` solves
+
+.. math::  \varphi_T(x_0; \mu) - x_0 = 0, \qquad (x_0 - \hat x)\cdot f(\hat x, \mu) = 0,
+
+where :math:`\varphi_T` is the flow and the second (phase) condition puts
+:math:`x_0` on the hyperplane through a reference point :math:`\hat x` (a
+guess, or the previous orbit of a continuation) orthogonal to the flow there.
+With time scaled to :math:`s = t/T \in [0, 1]`, one adaptive diffrax solve
+(Tsit5, tolerances ``rtol``/``atol``) integrates the state together with its
+variational equations
+
+.. math::
+
+    x' = T f(x, \mu), \quad \Phi' = T J(x, \mu)\,\Phi, \quad
+    w' = T\,(J(x, \mu)\,w + \partial_\mu f(x, \mu)),
+    \qquad \Phi(0) = I,\ w(0) = 0,
+
+so that :math:`\partial\varphi_T/\partial x_0 = \Phi(1)` (the monodromy matrix),
+:math:`\partial\varphi_T/\partial T = f(\varphi_T(x_0), \mu)` and
+:math:`\partial\varphi_T/\partial\mu = w(1)`: Newton's method gets its exact
+Jacobian from the same solve. The eigenvalues of the monodromy matrix are the
+Floquet multipliers; one is 1 (along the flow) and the orbit is stable when all
+the others lie inside the unit circle.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import NamedTuple
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from bayeshopf.simulators.base import SimulationError, System
+
+__all__ = ["PeriodicOrbit", "floquet_stable", "periodic_orbit", "sample_orbit"]
+
+#: Default tolerances of the adaptive solver.
+RTOL, ATOL = 1e-10, 1e-12
+#: Default number of points an orbit is sampled at (uniform in time over one period).
+N_POINTS = 256
+#: Refinement factor of the trigonometric interpolation used for peak-to-peak.
+_PTP_REFINE = 16
+
+
+class Shot(NamedTuple):
+    """One shooting solve: end point, its derivatives, and whether the solver succeeded."""
+
+    x1: np.ndarray
+    monodromy: np.ndarray
+    dx_dmu: np.ndarray
+    f1: np.ndarray
+    ok: bool
+
+
+@functools.lru_cache(maxsize=64)
+def param_tree(system: System) -> dict:
+    """``system.param_tree()``, built once per system (systems are immutable)."""
+    return system.param_tree()
+
+
+class _Kernels(NamedTuple):
+    f: object
+    shoot: object
+    sample: object
+    sample_batch: object
+
+
+@functools.lru_cache(maxsize=32)
+def kernels(system: System, rtol: float = RTOL, atol: float = ATOL) -> _Kernels:
+    """Compiled shooting and sampling functions of one system (cached per system)."""
+    rhs = system.rhs
+    jac_x = jax.jacfwd(rhs, argnums=0)
+    jac_mu = jax.jacfwd(rhs, argnums=1)
+    solver = diffrax.Dopri8()
+    ctrl = diffrax.PIDController(rtol=rtol, atol=atol)
+
+    def aug(s, y, args):
+        x, phi, w = y
+        T, mu, p = args
+        J = jac_x(x, mu, p)
+        return T * rhs(x, mu, p), T * (J @ phi), T * (J @ w + jac_mu(x, mu, p))
+
+    def shoot(x0, T, mu, p):
+        n = x0.shape[0]
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(aug), solver, 0.0, 1.0, None, (x0, jnp.eye(n), jnp.zeros(n)),
+            args=(T, mu, p), stepsize_controller=ctrl, saveat=diffrax.SaveAt(t1=True),
+            max_steps=2**16, throw=False,
+        )
+        x1, phi, w = (leaf[-1] for leaf in sol.ys)
+        ok = (sol.result == diffrax.RESULTS.successful).astype(x0.dtype)
+        # one flat array: a single device-to-host transfer per shot
+        return jnp.concatenate([x1, phi.ravel(), w, rhs(x1, mu, p), ok[None]])
+
+    def field_(s, x, args):
+        T, mu, p = args
+        return T * rhs(x, mu, p)
+
+    def sample(x0, T, mu, p, n):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field_), solver, 0.0, 1.0, None, x0, args=(T, mu, p),
+            stepsize_controller=ctrl, saveat=diffrax.SaveAt(ts=jnp.arange(n) / n),
+            max_steps=2**16, throw=False,
+        )
+        return sol.ys
+
+    return _Kernels(
+        f=jax.jit(rhs),
+        shoot=jax.jit(shoot),
+        sample=jax.jit(sample, static_argnums=4),
+        sample_batch=jax.jit(jax.vmap(sample, in_axes=(0, 0, 0, None, None)), static_argnums=4),
+    )
+
+
+def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) -> Shot:
+    r"""Integrate one period: :math:`\varphi_T(x_0)` with its derivatives (module docstring)."""
+    k = kernels(system, rtol, atol)
+    n = system.n_states
+    out = np.asarray(k.shoot(jnp.asarray(x0, dtype=jnp.float64),
+                             jnp.asarray(T, dtype=jnp.float64),
+                             jnp.asarray(mu, dtype=jnp.float64), param_tree(system)))
+    x1, phi = out[:n], out[n:n + n * n].reshape(n, n)
+    w, f1 = out[n + n * n:2 * n + n * n], out[2 * n + n * n:3 * n + n * n]
+    return Shot(x1, phi, w, f1, bool(out[-1] > 0.5))
+
+
+def sample_orbit(system: System, x0, T, mu, n_points: int = N_POINTS, *,
+                 rtol: float = RTOL, atol: float = ATOL) -> np.ndarray:
+    """States at ``t_k = k T / n_points``, ``k = 0..n_points−1``, shape ``(n_points, n)``."""
+    k = kernels(system, rtol, atol)
+    return np.asarray(k.sample(jnp.asarray(x0, dtype=jnp.float64),
+                               jnp.asarray(T, dtype=jnp.float64),
+                               jnp.asarray(mu, dtype=jnp.float64), param_tree(system),
+                               int(n_points)))
+
+
+def floquet_stable(multipliers: np.ndarray, tol: float = 1e-6) -> bool:
+    """Stable if every multiplier except the trivial one (closest to 1) has modulus < 1."""
+    m = np.asarray(multipliers)
+    rest = np.delete(m, int(np.argmin(np.abs(m - 1.0))))
+    return bool(rest.size == 0 or np.max(np.abs(rest)) < 1.0 - tol)
+
+
+def _sorted_multipliers(monodromy: np.ndarray) -> np.ndarray:
+    ev = np.linalg.eigvals(monodromy)
+    return ev[np.argsort(-np.abs(ev))]
+
+
+def refined_ptp(samples: np.ndarray, refine: int = _PTP_REFINE) -> np.ndarray:
+    """Peak-to-peak of periodic samples (axis 0) from their trigonometric interpolant.
+
+    The samples are zero-padded in frequency to ``refine`` times as many points,
+    so the extremes between samples are found to spectral accuracy.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    n = x.shape[0]
+    c = np.fft.rfft(x, axis=0)
+    if n % 2 == 0:  # split the Nyquist term so the interpolant stays real and exact
+        c[-1] *= 0.5
+    fine = np.fft.irfft(c, n * refine, axis=0) * refine
+    return fine.max(axis=0) - fine.min(axis=0)
+
+
+@dataclass(frozen=True)
+class PeriodicOrbit:
+    r"""One periodic orbit (limit cycle) at a fixed μ.
+
+    Attributes:
+        mu: The bifurcation parameter.
+        period: :math:`T`.
+        x0: The point at :math:`t = 0`, shape ``(n,)``.
+        states: States at :math:`t_k = kT/n_{pts}`, shape ``(n_pts, n)``.
+        floquet: Floquet multipliers (complex), by modulus descending.
+        stable: Whether all non-trivial multipliers lie inside the unit circle.
+        state_names: Names of the states (columns of ``states``).
+        amplitude: Peak-to-peak of every observed state over the orbit.
+        mean: Mean over one period of every observed state.
+    """
+
+    mu: float
+    period: float
+    x0: np.ndarray
+    states: np.ndarray
+    floquet: np.ndarray
+    stable: bool
+    state_names: tuple[str, ...]
+    amplitude: Mapping[str, float] = field(default_factory=dict)
+    mean: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("x0", "states", "floquet"):
+            a = np.array(getattr(self, name), copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times of ``states`` (one period, end excluded)."""
+        return np.arange(self.states.shape[0]) * self.period / self.states.shape[0]
+
+    @property
+    def frequency_hz(self) -> float:
+        """``1 / period``."""
+        return 1.0 / self.period
+
+    def channel(self, name: str) -> np.ndarray:
+        """Samples of one state over the orbit."""
+        if name not in self.state_names:
+            raise SimulationError(
+                f"state {name!r} expected among {', '.join(self.state_names)}; not found"
+            )
+        return self.states[:, self.state_names.index(name)]
+
+
+def make_orbit(system: System, mu: float, period: float, x0: np.ndarray,
+               monodromy: np.ndarray, states: np.ndarray) -> PeriodicOrbit:
+    """Assemble a :class:`PeriodicOrbit` (amplitudes and means of the observed states)."""
+    fl = _sorted_multipliers(monodromy)
+    obs = states[:, list(system.observed_index)]
+    ptp, mean = refined_ptp(obs), obs.mean(axis=0)
+    return PeriodicOrbit(
+        mu=float(mu), period=float(period), x0=np.asarray(x0), states=np.asarray(states),
+        floquet=fl, stable=floquet_stable(fl), state_names=system.state_names,
+        amplitude=MappingProxyType(dict(zip(system.observed, map(float, ptp), strict=True))),
+        mean=MappingProxyType(dict(zip(system.observed, map(float, mean), strict=True))),
+    )
+
+
+def periodic_orbit(system: System, mu: float, x0, period: float, *, n_points: int = N_POINTS,
+                   tol: float = 1e-10, max_iter: int = 25, rtol: float = RTOL,
+                   atol: float = ATOL) -> PeriodicOrbit:
+    r"""The periodic orbit at ``mu`` near the guess ``(x0, period)``, by Newton's method.
+
+    Solves :math:`\varphi_T(x_0) - x_0 = 0` and :math:`(x_0 - \hat x)\cdot f(\hat x) = 0`
+    (:math:`\hat x` the guess) for :math:`(x_0, T)` at fixed μ.
+
+    Args:
+        system: The system.
+        mu: The bifurcation parameter.
+        x0: Guess of a point on the orbit.
+        period: Guess of the period.
+        n_points: Number of samples of the returned orbit.
+        tol: Convergence when the Newton step is below ``tol`` relative to the
+            size of the orbit point and the period.
+        max_iter: Largest number of Newton steps.
+        rtol: Relative tolerance of the ODE solver.
+        atol: Absolute tolerance of the ODE solver.
+
+    Raises:
+        SimulationError: If Newton's method does not converge.
+    """
+    k = kernels(system, rtol, atol)
+    p = param_tree(system)
+    m = jnp.asarray(mu, dtype=jnp.float64)
+    xhat = np.array(x0, dtype=np.float64)
+    fhat = np.asarray(k.f(jnp.asarray(xhat), m, p))
+    x, T = xhat.copy(), float(period)
+    n = x.size
+    for _ in range(max_iter):
+        s = shoot(system, x, T, mu, rtol=rtol, atol=atol)
+        if not s.ok:
+            break
+        A = np.zeros((n + 1, n + 1))
+        A[:n, :n] = s.monodromy - np.eye(n)
+        A[:n, n] = s.f1
+        A[n, :n] = fhat
+        r = np.concatenate([s.x1 - x, [(x - xhat) @ fhat]])
+        try:
+            d = np.linalg.solve(A, -r)
+        except np.linalg.LinAlgError:
+            break
+        x, T = x + d[:n], T + d[n]
+        if T <= 0:
+            break
+        if np.max(np.abs(d[:n])) <= tol * (1 + np.max(np.abs(x))) and abs(d[n]) <= tol * T:
+            s = shoot(system, x, T, mu, rtol=rtol, atol=atol)
+            states = sample_orbit(system, x, T, mu, n_points, rtol=rtol, atol=atol)
+            return make_orbit(system, mu, T, x, s.monodromy, states)
+    raise SimulationError(
+        f"{system.name}: no periodic orbit found at {system.parameter} = {float(mu):g} "
+        f"near the guess (period {float(period):.4g}); Newton's method did not converge"
+    )
