@@ -127,6 +127,56 @@ class HopfFit:
         return posterior_predictive_check(self.samples, self.spec, self.features)
 
 
+@dataclass(frozen=True)
+class PointFit:
+    """A point-estimate fit: MAP, or maximum likelihood as in the paper (immutable).
+
+    It has no posterior. Its ``samples`` are the optimum as a single draw, so
+    the prediction functions apply; :meth:`plugin_samples` repeats it to give
+    the plug-in band (fixed parameters, only the fitted scatter σ random).
+
+    Attributes:
+        spec: Model structure.
+        features: The training features.
+        map: The optimisation result.
+        regularised: ``True`` for MAP (with the priors), ``False`` for maximum
+            likelihood (the paper's approach).
+        settings: Settings used.
+        seed: Seed used.
+        timings: Seconds per stage.
+    """
+
+    spec: ModelSpec
+    features: OrbitFeatures
+    map: MapResult
+    regularised: bool
+    settings: FitSettings
+    seed: int
+    timings: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def samples(self) -> dict:
+        """The optimum as one draw (every site with a leading axis of length 1)."""
+        return {k: np.asarray(v)[None] for k, v in self.map.params.items()}
+
+    def plugin_samples(self, n: int = 300) -> dict:
+        """The optimum repeated ``n`` times (for plug-in predictive bands)."""
+        return {k: np.repeat(v, n, axis=0) for k, v in self.samples.items()}
+
+    def value(self, name: str) -> float:
+        """Point value of ``mu0``, ``a2`` or ``mu_fold`` (nan when absent)."""
+        if name == "mu_fold":
+            if self.spec.criticality != "subcritical":
+                return float("nan")
+            return float(normal_form.fold_point(self.map.params["mu0"], self.map.params["a2"]))
+        return float(self.map.params[name])
+
+    def amplitude(self, mu, branch: str = "stable", predictive: bool = False) -> np.ndarray:
+        """Amplitude at μ: the curve ``(1, n_mu)``, or plug-in predictive draws ``(300, n_mu)``."""
+        samples = self.plugin_samples() if predictive else self.samples
+        return predict_amplitude(samples, self.spec, mu, branch, predictive, seed=self.seed)
+
+
 def _sign(branch: str) -> int:
     if branch not in ("stable", "unstable"):
         raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
@@ -143,6 +193,41 @@ def predict_amplitude(samples, spec, mu, branch="stable", predictive=False, *, s
     return amplitude_draws(samples, spec, mu, sign)
 
 
+@dataclass(frozen=True)
+class _Prepared:
+    features: OrbitFeatures
+    spec: ModelSpec
+    model_kwargs: dict
+    mu_label: str
+    mu_units: str
+    amplitude_units: str
+
+
+def _prepare(recordings, criticality: str, settings: FitSettings,
+             single_branch: bool = False) -> _Prepared:
+    """Features, model structure and the model's data arguments."""
+    if isinstance(recordings, RecordingSet):
+        features = extract_features(recordings, n_h=settings.n_h)
+        labels = recordings.mu_label, recordings.mu_units, recordings.units[0]
+    else:
+        features = recordings
+        labels = "mu", "", features.frame.units[0]
+    if single_branch:
+        features = replace(features, unstable=np.zeros_like(features.unstable))
+    spec = build_spec(
+        features, criticality, nn_width=settings.nn_width, nn_depth=settings.nn_depth,
+        mu_label=labels[0], mu_units=labels[1],
+    )
+    kwargs = dict(
+        spec=spec,
+        mu=jnp.asarray(features.mu),
+        sign=jnp.asarray(branch_signs(features.unstable), dtype=float),
+        coeffs_sd=jnp.asarray(features.coeffs_sd),
+        coeffs=jnp.asarray(features.coeffs),
+    )
+    return _Prepared(features, spec, kwargs, *labels)
+
+
 def fit(
     recordings: RecordingSet | OrbitFeatures,
     criticality: str = "subcritical",
@@ -151,6 +236,7 @@ def fit(
     settings: FitSettings | None = None,
     progress: bool = True,
     compilation_cache: bool = True,
+    single_branch: bool = False,
 ) -> HopfFit:
     """Fit the Bayesian hybrid normal-form model to LCO recordings.
 
@@ -165,6 +251,9 @@ def fit(
         settings: Step counts and model sizes (:class:`FitSettings`).
         progress: Show progress bars.
         compilation_cache: Use JAX's persistent compilation cache.
+        single_branch: Ignore the branch labels: every recording is taken to
+            lie on the one LCO branch of a supercritical model (used to test
+            criticality from the orbits alone, see :func:`fit_auto`).
 
     Returns:
         A :class:`HopfFit`.
@@ -174,27 +263,10 @@ def fit(
         enable_compilation_cache()
     timings = {}
     t0 = time.perf_counter()
-    if isinstance(recordings, RecordingSet):
-        features = extract_features(recordings, n_h=settings.n_h)
-        mu_label, mu_units = recordings.mu_label, recordings.mu_units
-        amp_units = recordings.units[0]
-    else:
-        features = recordings
-        mu_label, mu_units = "mu", ""
-        amp_units = features.frame.units[0]
-    spec = build_spec(
-        features, criticality, nn_width=settings.nn_width, nn_depth=settings.nn_depth,
-        mu_label=mu_label, mu_units=mu_units,
-    )
+    prep = _prepare(recordings, criticality, settings, single_branch)
+    spec, features, kwargs = prep.spec, prep.features, prep.model_kwargs
     timings["features"] = time.perf_counter() - t0
 
-    kwargs = dict(
-        spec=spec,
-        mu=jnp.asarray(features.mu),
-        sign=jnp.asarray(branch_signs(features.unstable), dtype=float),
-        coeffs_sd=jnp.asarray(features.coeffs_sd),
-        coeffs=jnp.asarray(features.coeffs),
-    )
     k_map, k_svi = jax.random.split(jax.random.PRNGKey(seed))
     t0 = time.perf_counter()
     map_result = fit_map(
@@ -213,8 +285,55 @@ def fit(
     timings["svi"] = time.perf_counter() - t0
     return HopfFit(
         spec=spec, features=features, map=map_result, svi=svi_result, settings=settings,
-        seed=seed, mu_label=mu_label, mu_units=mu_units, amplitude_units=amp_units,
-        timings=timings,
+        seed=seed, mu_label=prep.mu_label, mu_units=prep.mu_units,
+        amplitude_units=prep.amplitude_units, timings=timings,
+    )
+
+
+def fit_point(
+    recordings: RecordingSet | OrbitFeatures,
+    criticality: str = "subcritical",
+    *,
+    regularised: bool = True,
+    seed: int = 0,
+    settings: FitSettings | None = None,
+    progress: bool = True,
+    compilation_cache: bool = True,
+) -> PointFit:
+    """Point-estimate fit: the MAP stage of :func:`fit` alone, with or without priors.
+
+    ``regularised=False`` maximises the likelihood alone, which is the paper's
+    fit (least squares of the Fourier coefficients, no priors, no uncertainty);
+    it is the baseline against which the Bayesian fit's robustness is measured.
+
+    Args:
+        recordings: The recordings, or features already extracted from them.
+        criticality: ``"subcritical"`` or ``"supercritical"``.
+        regularised: Keep the priors (MAP) or drop them (maximum likelihood).
+        seed: Seed.
+        settings: Step counts and model sizes.
+        progress: Show progress bars.
+        compilation_cache: Use JAX's persistent compilation cache.
+
+    Returns:
+        A :class:`PointFit`.
+    """
+    settings = settings or FitSettings()
+    if compilation_cache:
+        enable_compilation_cache()
+    t0 = time.perf_counter()
+    prep = _prepare(recordings, criticality, settings)
+    k_map, _ = jax.random.split(jax.random.PRNGKey(seed))
+    map_result = fit_map(
+        hopf_model, prep.model_kwargs, initial_values(prep.features, prep.spec), key=k_map,
+        adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
+        regularised=regularised,
+    )
+    if not np.isfinite(map_result.losses[-1]):
+        raise FitError("the point fit did not converge: the loss is not finite")
+    return PointFit(
+        spec=prep.spec, features=prep.features, map=map_result, regularised=regularised,
+        settings=settings, seed=seed, timings={"map": time.perf_counter() - t0},
     )
 
 
@@ -230,27 +349,33 @@ def fit_auto(
     settings: FitSettings | None = None,
     progress: bool = True,
 ) -> tuple[HopfFit, dict]:
-    """Fit with the criticality decided from the data.
+    """Fit with the criticality decided from the data by PSIS-LOO.
 
-    Unstable LCO recordings settle it: a supercritical Hopf has none, so the
-    model is subcritical. Otherwise both models are fitted and compared by
-    PSIS-LOO (ArviZ), and the one with the higher expected log predictive
-    density is returned.
+    Both normal forms are fitted to the same Fourier coefficients and compared
+    by their expected log predictive density (ArviZ ``compare``). The
+    supercritical model has one LCO per μ, so it ignores the branch labels and
+    must explain every orbit, labelled stable or unstable, as that one LCO; the
+    subcritical model places the unstable recordings on its inner branch. Two
+    recordings of different size at the same μ, or amplitudes that do not grow
+    from zero at a Hopf point below every recording, are what a supercritical
+    model cannot fit, and the ELPD says by how much.
 
     Returns:
-        ``(fit, evidence)``; ``evidence`` says how the choice was made.
+        ``(fit, evidence)``: the preferred fit, and ``evidence`` with each
+        model's ELPD, its standard error, the ELPD difference with its standard
+        error (``dse``), the stacking weights, the Pareto k diagnostics and the
+        ``preferred`` criticality.
     """
     from bayeshopf.diagnostics.comparison import compare_criticality
 
-    if recordings.is_unstable.any():
-        return fit(recordings, "subcritical", seed=seed, settings=settings, progress=progress), {
-            "method": "unstable recordings present",
-            "detail": f"{int(recordings.is_unstable.sum())} unstable LCO recording(s); a "
-            "supercritical Hopf bifurcation has no unstable LCOs",
-            "preferred": "subcritical",
-        }
-    fits = {c: fit(recordings, c, seed=seed, settings=settings, progress=progress)
-            for c in ("subcritical", "supercritical")}
+    fits = {
+        c: fit(recordings, c, seed=seed, settings=settings, progress=progress,
+               single_branch=c == "supercritical")
+        for c in ("subcritical", "supercritical")
+    }
     evidence = compare_criticality(fits)
     evidence["method"] = "PSIS-LOO"
+    evidence["branch_labels"] = (
+        "used by the subcritical model only" if recordings.is_unstable.any() else "all stable"
+    )
     return fits[evidence["preferred"]], evidence

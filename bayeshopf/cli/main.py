@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 import time
 import traceback
 from pathlib import Path
@@ -84,6 +85,9 @@ def _settings(args):
 def _print_table(summary: dict, truth: dict | None = None) -> None:
     u, au = summary["mu_units"], summary["amplitude_units"]
     print(f"criticality: {summary['criticality']}")
+    evidence = summary.get("criticality_evidence")
+    if evidence and "statement" in evidence:
+        print(textwrap.fill(evidence["statement"], 88))
     hdr = f"{'':8s} {'median':>10s} {'90% interval':>24s}" + (f" {'true':>10s}" if truth else "")
     print(hdr)
     for k in ("mu0", "a2", "mu_fold"):

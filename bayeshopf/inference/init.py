@@ -101,7 +101,10 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
             best = sol
     if best is None or not np.isfinite(best.cost):
         raise FitError("could not find a starting point: the closed-form radius fit failed")
-    x = best.x
+    x = best.x.copy()
+    # keep the start off the boundary: a gap of 0 puts a recording exactly at the
+    # fold, where the radius has an infinite μ-derivative and the gradient is nan
+    x[:2] = np.maximum(x[:2], np.log(0.02 * span))
     kappa = float(np.exp(x[2]))
     # orbit centres in the frame, regressed on μ̃: T_s + T_L_mu μ̃
     centres = fourier.curve(features.coeffs, 256).mean(axis=1)

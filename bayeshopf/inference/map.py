@@ -8,11 +8,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from numpyro.handlers import Messenger
 from numpyro.infer.initialization import init_to_value
 from numpyro.infer.util import initialize_model
 
 from bayeshopf.inference._progress import run_chunked
 from bayeshopf.inference.results import MapResult
+
+
+class likelihood_only(Messenger):
+    """Handler that drops every log density but that of the observed sites.
+
+    Under it NumPyro's potential energy is the negative log likelihood (the
+    priors and the Jacobians of the constraining transforms are scaled by 0), so
+    :func:`fit_map` returns the maximum-likelihood point: the paper's
+    point-estimate fit, without priors.
+    """
+
+    def process_message(self, msg):
+        """Scale the log density of every latent site (and Jacobian factor) by 0."""
+        if msg["type"] == "sample" and not (msg["is_observed"] and not msg["name"].startswith("_")):
+            msg["scale"] = 0.0 if msg["scale"] is None else 0.0 * msg["scale"]
 
 
 def fit_map(
@@ -26,6 +42,7 @@ def fit_map(
     learning_rate: float = 1e-2,
     gtol: float = 1e-6,
     progress: bool = True,
+    regularised: bool = True,
 ) -> MapResult:
     """Maximum a posteriori estimate of a NumPyro model.
 
@@ -46,10 +63,14 @@ def fit_map(
         learning_rate: Adam step size.
         gtol: Gradient-norm tolerance that counts as converged.
         progress: Show progress bars.
+        regularised: ``False`` drops the priors (:class:`likelihood_only`):
+            maximum likelihood instead of MAP.
 
     Returns:
         A :class:`MapResult`.
     """
+    if not regularised:
+        model = likelihood_only(model)
     info = initialize_model(
         key,
         model,

@@ -129,6 +129,19 @@ def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
     )
 
 
+def orbit_at(params: HopfParams, mu, sign, phi, spec: ModelSpec):
+    """Points of the predicted orbit at normal-form phases φ, shape ``phi.shape + (2,)``.
+
+    ``w(φ) = U12(r(μ, sign) [cos φ, sin φ], μ̃)`` in the planar frame; ``nan``
+    where the branch does not exist.
+    """
+    r = normal_form.lco_radius(mu, params.mu0, params.a2, sign)
+    u = r * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
+    return U12(
+        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale
+    )
+
+
 def orbit_in_frame(params: HopfParams, mu, sign, spec: ModelSpec):
     """Predicted orbit in the planar frame, shape ``(n_phi, 2)``.
 
@@ -136,11 +149,7 @@ def orbit_in_frame(params: HopfParams, mu, sign, spec: ModelSpec):
     Where the branch does not exist the points are ``nan``.
     """
     phi = jnp.linspace(0.0, 2.0 * jnp.pi, spec.n_phi, endpoint=False)
-    r = normal_form.lco_radius(mu, params.mu0, params.a2, sign)
-    u = r * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
-    return U12(
-        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale
-    )
+    return orbit_at(params, mu, sign, phi, spec)
 
 
 def predicted_coeffs(params: HopfParams, mu, sign, spec: ModelSpec):

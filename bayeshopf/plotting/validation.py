@@ -1,0 +1,136 @@
+"""The leave-one-out figure (the paper's Fig. exp_val), with bands."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from bayeshopf.diagnostics.bifurcation import bifurcation_diagram
+from bayeshopf.errors import DataError
+from bayeshopf.features.orbits import OrbitFeatures
+from bayeshopf.plotting._style import (
+    BRANCH_COLOURS,
+    BRANCH_MARKERS,
+    LABEL_SIZE,
+    LEGEND_SIZE,
+    TICK_SIZE,
+    axis_label,
+    marker_face,
+    new_figure,
+    style_axes,
+)
+from bayeshopf.plotting.diagram import _draw_band
+
+#: Colours of the point fits.
+POINT_COLOURS = {"map": "#555555", "ml": "#2ca02c"}
+POINT_STYLES = {"map": ":", "ml": "-."}
+
+
+def _point_curve(fit_, mu, branch):
+    try:
+        return fit_.amplitude(mu, branch)[0]
+    except Exception:  # a supercritical point fit has no unstable branch
+        return np.full(np.shape(mu), np.nan)
+
+
+def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: str = "airspeed",
+                       mu_units: str = "m/s", amplitude_units: str = "m",
+                       n_cols: int = 4) -> Figure:
+    """One panel per held-out recording, and a last panel with the fold per fold.
+
+    Each panel shows the Bayesian fit without that recording (median, 50% and
+    90% bands of both branches, dotted 90% band of a new recording), the
+    point fits' curves (MAP, maximum likelihood), the training recordings and
+    the held-out one (a star; filled where it lies inside the Bayesian 90%
+    band). The last panel shows μ_SN of every fold: Bayesian median with its
+    90% interval, and the point estimates.
+
+    Args:
+        loo: A :class:`~bayeshopf.validation.LeaveOneOut` made with ``keep_fits=True``.
+        features: Features of all recordings (measured amplitudes).
+        mu_grid: μ grid of the curves (default: the data's range widened).
+        mu_label: Name of μ (axis label).
+        mu_units: Unit of μ.
+        amplitude_units: Unit of the amplitude.
+        n_cols: Panels per row.
+
+    Returns:
+        The figure.
+    """
+    if any(f.fits is None for f in loo.folds):
+        raise DataError("plot_leave_one_out needs the folds' fits; got a LeaveOneOut made "
+                        "without keep_fits=True")
+    mu_all = np.asarray(features.mu, float)
+    if mu_grid is None:
+        span = mu_all.max() - mu_all.min()
+        mu_grid = np.linspace(mu_all.min() - 0.3 * span, mu_all.max() + 0.45 * span, 160)
+    n_panels = len(loo.folds) + 1
+    n_rows = int(np.ceil(n_panels / n_cols))
+    fig = new_figure(3.1 * n_cols, 2.7 * n_rows)
+    axes = fig.subplots(n_rows, n_cols, squeeze=False).ravel()
+    names = list(features.names)
+    y_max = 1.25 * float(np.nanmax(features.amplitude))
+    for ax, fold in zip(axes, loo.folds, strict=False):
+        style_axes(ax)
+        if "bayes" in fold.fits:
+            bfit = fold.fits["bayes"]
+            diag = bifurcation_diagram(bfit.samples, bfit.spec, mu_grid, seed=bfit.seed)
+            for branch, band in (("stable", diag.stable), ("unstable", diag.unstable)):
+                if band is not None:
+                    _draw_band(ax, branch, band, 0.5)
+        for m in ("map", "ml"):
+            if m in fold.fits:
+                for branch in ("stable", "unstable"):
+                    ax.plot(mu_grid, _point_curve(fold.fits[m], mu_grid, branch),
+                            color=POINT_COLOURS[m], ls=POINT_STYLES[m], lw=1.1)
+        keep = np.array([n != fold.name for n in names])
+        for branch, mask in (("stable", ~features.unstable), ("unstable", features.unstable)):
+            sel = keep & mask
+            ax.plot(mu_all[sel], features.amplitude[sel], ls="none", marker=BRANCH_MARKERS[branch],
+                    ms=4.5, mfc=marker_face(branch), mec=BRANCH_COLOURS[branch], mew=1.0, zorder=5)
+        inside = fold.inside("bayes") if "bayes" in fold.predictions else False
+        ax.plot([fold.mu], [fold.measured], ls="none", marker="*", ms=13, mec="k", mew=1.0,
+                mfc="gold" if inside else "white", zorder=6)
+        ax.set_title(f"without {fold.mu:g} {mu_units} ({fold.branch})", fontsize=LABEL_SIZE - 1)
+        ax.set_xlim(mu_grid[0], mu_grid[-1])
+        ax.set_ylim(0, y_max)
+        ax.tick_params(labelsize=TICK_SIZE - 1)
+    for ax in axes[: len(loo.folds)]:
+        ax.set_xlabel(axis_label(mu_label, mu_units), fontsize=LABEL_SIZE - 1)
+        ax.set_ylabel(axis_label("amplitude", amplitude_units), fontsize=LABEL_SIZE - 1)
+    ax = axes[len(loo.folds)]
+    style_axes(ax)
+    x = np.arange(len(loo.folds))
+    if "bayes" in loo.methods:
+        fm = np.array([f.predictions["bayes"].mu_fold for f in loo.folds])
+        ax.errorbar(x, fm[:, 0], yerr=[fm[:, 0] - fm[:, 1], fm[:, 2] - fm[:, 0]], fmt="o",
+                    color=BRANCH_COLOURS["stable"], capsize=3, ms=4, label="Bayesian, 90%")
+    for k, m in enumerate(("map", "ml")):
+        if m in loo.methods:
+            v = [f.predictions[m].mu_fold[0] for f in loo.folds]
+            ax.plot(x + 0.15 * (k + 1), v, ls="none", marker="sx"[k], color=POINT_COLOURS[m],
+                    ms=5, label={"map": "MAP only", "ml": "max. likelihood (paper)"}[m])
+    ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=TICK_SIZE - 2,
+                  rotation=45)
+    ax.set_xlabel("held-out recording (s: stable, u: unstable)", fontsize=LABEL_SIZE - 2)
+    ax.set_ylabel(axis_label("fold μ_SN", mu_units), fontsize=LABEL_SIZE - 1)
+    ax.set_title("fold per fold", fontsize=LABEL_SIZE - 1)
+    ax.legend(fontsize=LEGEND_SIZE - 2, loc="best")
+    for ax in axes[n_panels:]:
+        ax.set_visible(False)
+    handles = [
+        Patch(color=BRANCH_COLOURS["stable"], alpha=0.35, label="Bayesian stable (50/90%)"),
+        Patch(color=BRANCH_COLOURS["unstable"], alpha=0.35, label="Bayesian unstable (50/90%)"),
+        Line2D([], [], color="k", ls=":", lw=0.8, label="90% band of a new recording"),
+        Line2D([], [], color=POINT_COLOURS["map"], ls=POINT_STYLES["map"], label="MAP only"),
+        Line2D([], [], color=POINT_COLOURS["ml"], ls=POINT_STYLES["ml"],
+               label="maximum likelihood (paper)"),
+        Line2D([], [], ls="none", marker="*", ms=11, mfc="gold", mec="k",
+               label="held out (filled: inside 90%)"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=LEGEND_SIZE - 1,
+               frameon=False, bbox_to_anchor=(0.5, 0.0))
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    return fig
