@@ -107,6 +107,12 @@ def _winding(theta: np.ndarray) -> tuple[float, np.ndarray]:
     return float(turns), np.bincount(bins, minlength=_N_ANGLE_BINS)
 
 
+def _encircles(w: np.ndarray) -> bool:
+    """Whether points ``w`` (in the frame) wind round the origin twice, visiting every sector."""
+    turns, visits = _winding(fourier.polar(w)[1])
+    return abs(turns) >= 2 and bool(np.all(visits > 0))
+
+
 def extract_features(
     rs: RecordingSet,
     *,
@@ -121,7 +127,9 @@ def extract_features(
         n_h: Number of harmonics of R(θ).
         segment_periods: Length of a segment in periods of the oscillation.
         frame: Planar frame to use; by default built from ``rs``
-            (:meth:`PlanarFrame.from_orbits`). Pass a fit's frame to featurise new
+            (:meth:`PlanarFrame.from_orbits`, centred on the mean of the orbit
+            means, or on the point deepest inside every orbit when some orbit
+            does not encircle that mean). Pass a fit's frame to featurise new
             recordings consistently.
 
     Returns:
@@ -137,6 +145,10 @@ def extract_features(
     orbits = [r.planar(rs.planar) for r in rs]
     if frame is None:
         frame = PlanarFrame.from_orbits(orbits, rs.planar, rs.units)
+        if not all(_encircles(frame.to_frame(z)) for z in orbits):
+            # the orbit centres drift more than the smallest orbits are wide:
+            # take the point deepest inside every orbit (frame module docstring)
+            frame = PlanarFrame.from_orbits(orbits, rs.planar, rs.units, centre="deepest")
     n_c = fourier.n_coefficients(n_h)
     out = {k: [] for k in ("c", "sd", "nseg", "amp", "amp_sd", "f")}
     for rec, z in zip(rs, orbits, strict=True):

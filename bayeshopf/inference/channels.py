@@ -2,23 +2,24 @@
 
 The paper's "mapping to other coordinates": a further measured channel ``y``
 (the actuator command, the CBC target, a strain gauge...) is a function of the
-normal-form state, ``y = f(u1, u2, μ)``. Once the planar map is fitted, every
-measured sample is placed on its predicted orbit, which inverts U12 along the
-LCO: the sample's normal-form phase is that of the nearest point of the
-predicted orbit,
+state, ``y = f(u, μ)``. Once the planar map is fitted, every measured sample is
+placed on its predicted orbit, which inverts U12 along the LCO: the sample's
+normal-form phase is that of the nearest point of the predicted orbit,
 
-    φ(t) = argmin_φ ‖w(t) − U12(r(μ) [cos φ, sin φ], μ̃)‖,
+    φ(t) = argmin_φ ‖w(t) − U12(r(μ) [cos φ, sin φ], μ̃)‖.
 
-and ``u(t) = r(μ) [cos φ(t), sin φ(t)]``. On the LCO a smooth ``f`` is a Fourier
-series in φ whose k-th harmonic is a polynomial in r of lowest degree k,
+``f`` is linear in basis functions of the state,
 
-    y(φ) = Σ_k a_k cos kφ + b_k sin kφ,   a_k, b_k = r^k (β_0 + β_1 μ̃) [+ β_2 r² for k = 0],
+    f = β · b(u, μ̃),   b = [1, μ̃, w1, w2, μ̃ w1, μ̃ w2, w1², w1 w2, w2², w1³, w2³],
 
-so each recording gives its coefficients by least squares in φ, and each
-coefficient is a Bayesian linear regression across recordings (conjugate
-normal–inverse-gamma, so the scatter between recordings is estimated, not
-assumed). This is repeated for draws of the map's posterior, so the channel's
-band carries the map's uncertainty and the regression's.
+where ``w = U12(u, μ̃)`` is the fitted planar position (so the basis carries the
+map's gain and its correction) and the quadratic and cubic terms allow a
+nonlinear channel. As for the map, the fit compares closed curves: ``y`` and
+each basis function are projected onto a Fourier series in φ (K harmonics) per
+recording, and ``β`` is a conjugate Bayesian linear regression of all
+recordings' coefficients (conjugate, under the reference prior), so the misfit
+σ is estimated. It is repeated for draws of the map's posterior, so the
+channel's band carries the map's uncertainty and the regression's.
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ from bayeshopf.model.hybrid import branch_signs
 N_PHASE_GRID = 720
 
 
+#: Names of the basis functions ``b(u, μ̃)``.
+BASIS = ("1", "mu", "w1", "w2", "mu*w1", "mu*w2", "w1^2", "w1*w2", "w2^2", "w1^3", "w2^3")
+
+
 @dataclass(frozen=True)
 class ChannelFit:
     """A further channel regressed on the normal-form state (immutable).
@@ -48,15 +53,14 @@ class ChannelFit:
         units: Its unit.
         n_harmonics: Harmonics K of the channel's waveform in φ.
         draw_index: Posterior draws of the map used, shape ``(n_draws,)``.
-        beta: Regression coefficients per draw and Fourier coefficient,
-            shape ``(n_draws, 2K+1, n_design)`` (unused design columns are 0).
-        sigma: Scatter between recordings per draw and coefficient, ``(n_draws, 2K+1)``.
-        measured_coeffs: Per-recording coefficients at the draw closest to the
-            map's MAP point, ``(n_rec, 2K+1)``.
-        measured_amplitude: Per-recording peak-to-peak of the measured channel's
-            Fourier reconstruction, ``(n_rec,)``.
+        beta: Regression coefficients per draw, ``(n_draws, len(BASIS))``.
+        sigma: Misfit scatter of a Fourier coefficient per draw, ``(n_draws,)``.
+        measured_coeffs: Per-recording Fourier coefficients of the channel at a
+            central draw, ``(n_rec, 2K+1)``.
+        measured_amplitude: Per-recording peak-to-peak of the measured
+            channel's Fourier reconstruction, ``(n_rec,)``.
         phases: Per recording, ``(φ, y)`` of the (down-sampled) measured
-            samples at the MAP point, for plots.
+            samples at that draw, for plots.
     """
 
     name: str
@@ -73,54 +77,67 @@ class ChannelFit:
                  n_phi: int = 128, seed: int = 0) -> np.ndarray:
         """The channel along the orbit at μ, ``(n_draws, n_phi)`` on ``φ ∈ [0, 2π)``.
 
-        ``predictive=True`` adds the scatter between recordings: the band a new
-        recording's waveform falls in.
+        ``predictive=True`` adds the misfit σ to every Fourier coefficient: the
+        band a new recording's waveform falls in.
         """
         sign = normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
-        r = _radii(fit_, self.draw_index, np.array([mu]), np.array([sign]))[:, 0]
-        x = np.stack([_design(k, r, fit_.spec.mu_tilde(mu)) for k in _orders(self.n_harmonics)],
-                     axis=1)  # (n_draws, n_c, n_design)
-        c = np.einsum("dcp,dcp->dc", x, self.beta)
+        phi = np.linspace(0.0, 2.0 * np.pi, n_phi, endpoint=False)
+        b = _basis_along_orbits(fit_, self.draw_index, mu, sign, phi)  # (d, n_phi, p)
+        y = np.einsum("dnp,dp->dn", b, self.beta)
         if predictive:
             rng = np.random.default_rng(seed)
-            c = c + self.sigma * rng.standard_normal(c.shape)
-        phi = np.linspace(0.0, 2.0 * np.pi, n_phi, endpoint=False)
-        return c @ _basis(phi, self.n_harmonics).T
+            eps = self.sigma[:, None] * rng.standard_normal((y.shape[0], 2 * self.n_harmonics + 1))
+            y = y + eps @ _fourier(phi, self.n_harmonics).T
+        return y
 
     def amplitude(self, fit_, mu, branch: str = "stable", *, predictive: bool = False,
                   seed: int = 0) -> np.ndarray:
-        """Peak-to-peak of the channel at each μ, ``(n_draws, n_mu)``."""
+        """Peak-to-peak of the channel at each μ, ``(n_draws, n_mu)``.
+
+        The predictive draws use common random numbers along μ (one replicated
+        recording per draw), so band edges are smooth curves.
+        """
         mu = np.atleast_1d(np.asarray(mu, float))
         return np.stack([np.ptp(self.waveform(fit_, m, branch, predictive=predictive,
-                                              seed=seed + i), axis=-1)
-                         for i, m in enumerate(mu)], axis=1)
+                                              seed=seed), axis=-1)
+                         for m in mu], axis=1)
 
 
-def _orders(n_harmonics: int) -> list[int]:
-    """Harmonic order of each coefficient ``[a0, a1..aK, b1..bK]``."""
-    return [0, *range(1, n_harmonics + 1), *range(1, n_harmonics + 1)]
-
-
-def _basis(phi: np.ndarray, n_harmonics: int) -> np.ndarray:
+def _fourier(phi: np.ndarray, n_harmonics: int) -> np.ndarray:
+    """``[1, cos φ..cos Kφ, sin φ..sin Kφ]``, shape ``(n_phi, 2K+1)``."""
     k = np.arange(1, n_harmonics + 1)
     a = phi[:, None] * k[None]
     return np.concatenate([np.ones((phi.size, 1)), np.cos(a), np.sin(a)], axis=1)
 
 
-def _design(order: int, r, mu_t) -> np.ndarray:
-    """Design row(s) of a coefficient of harmonic ``order``: ``r^k [1, μ̃, r²·(k = 0)]``."""
-    r = np.asarray(r, float)
-    mu_t = np.broadcast_to(np.asarray(mu_t, float), r.shape)
-    rk = r**order
-    third = r**2 if order == 0 else np.zeros_like(r)
-    return np.stack([rk, rk * mu_t, third], axis=-1)
+def _basis(w, mu_t):
+    """``b(u, μ̃)`` from the planar position ``w`` (..., 2), shape ``(..., len(BASIS))``."""
+    w1, w2 = w[..., 0], w[..., 1]
+    m = jnp.broadcast_to(mu_t, w1.shape)
+    one = jnp.ones_like(w1)
+    return jnp.stack([one, m, w1, w2, m * w1, m * w2, w1**2, w1 * w2, w2**2, w1**3, w2**3],
+                     axis=-1)
 
 
-def _radii(fit_, idx, mu, sign) -> np.ndarray:
-    s = fit_.samples
-    return np.asarray(normal_form.lco_radius(
-        np.asarray(mu)[None], np.asarray(s["mu0"])[idx, None], np.asarray(s["a2"])[idx, None],
-        np.asarray(sign, float)[None]))
+def _orbit_basis_fn(spec):
+    def build():
+        def f(sites, mu, sign, phi):
+            def one(s):
+                w = hybrid.orbit_at(hybrid.params_from_sites(s, spec), mu, sign, phi, spec)
+                return _basis(w, spec.mu_tilde(mu))
+
+            return jax.vmap(one)(sites)
+
+        return f
+
+    return hybrid.jit_for_spec(spec, "channel_basis", build)
+
+
+def _basis_along_orbits(fit_, idx, mu, sign, phi) -> np.ndarray:
+    sites = {k: v[idx] for k, v in _site_arrays(fit_.samples, fit_.spec).items()}
+    f = _orbit_basis_fn(fit_.spec)
+    return np.asarray(f(sites, jnp.asarray(mu, float), jnp.asarray(sign, float),
+                        jnp.asarray(phi)))
 
 
 def _phase_finder(spec):
@@ -140,24 +157,25 @@ def _phase_finder(spec):
     return hybrid.jit_for_spec(spec, "phase_finder", build)
 
 
-def _nig_draws(x, y, rng, n, g=100.0):
-    """Draws of ``(β, σ)`` of ``y = x β + σ ε`` under a conjugate normal–inverse-gamma prior.
+def _regression_draw(x, y, rng):
+    """One posterior draw of ``(β, σ)`` of ``y = x β + σ ε`` under the reference prior.
 
-    Zellner's g-prior ``β | σ² ~ N(0, g σ² (xᵀx)⁻¹)`` with g = 100 (the data
-    outweigh it a hundredfold, and it is invariant to the units of the design),
-    and ``σ² ~ InvGamma(1, 0.01·var(y))`` (weak).
+    With ``p(β, σ²) ∝ 1/σ²`` the posterior is conjugate:
+    ``σ² | y ~ InvGamma((n − p)/2, RSS/2)`` and ``β | σ², y ~ N(β̂, σ² (xᵀx)⁻¹)``,
+    where ``β̂`` is the least-squares solution and RSS its residual sum of squares.
     """
-    p = x.shape[1]
-    v0_inv = (x.T @ x) / g
-    vn = np.linalg.inv(v0_inv + x.T @ x)
-    mn = vn @ x.T @ y
-    a0, b0 = 1.0, 0.01 * (np.var(y) + 1e-30)
-    an = a0 + 0.5 * y.size
-    bn = b0 + 0.5 * max(float(y @ y - mn @ (v0_inv + x.T @ x) @ mn), 0.0)
-    sigma2 = bn / rng.gamma(an, 1.0, size=n)
-    chol = np.linalg.cholesky(vn + 1e-15 * np.eye(p))
-    beta = mn[None] + np.sqrt(sigma2)[:, None] * (rng.standard_normal((n, p)) @ chol.T)
-    return beta, np.sqrt(sigma2)
+    n, p = x.shape
+    if n <= p:
+        raise FitError(f"channel regression needs more coefficients than basis functions; "
+                       f"got {n} coefficients for {p} basis functions")
+    xtx = x.T @ x
+    xtx = xtx + 1e-12 * np.trace(xtx) / p * np.eye(p)
+    cov = np.linalg.inv(xtx)
+    beta_hat = cov @ x.T @ y
+    rss = float(np.sum((y - x @ beta_hat) ** 2))
+    sigma2 = (0.5 * rss + 1e-300) / rng.gamma(0.5 * (n - p), 1.0)
+    beta = rng.multivariate_normal(beta_hat, sigma2 * (cov + cov.T) / 2.0)
+    return beta, float(np.sqrt(sigma2))
 
 
 def fit_channel(
@@ -202,14 +220,16 @@ def fit_channel(
     idx = np.sort(rng.choice(n_total, size=min(n_draws, n_total), replace=False))
     sites = {k: v[idx] for k, v in _site_arrays(fit_.samples, fit_.spec).items()}
     signs = branch_signs(feats.unstable).astype(float)
-    radii = _radii(fit_, idx, feats.mu, signs)  # (n_draws, n_rec)
     find = _phase_finder(fit_.spec)
     n_c = 2 * n_harmonics + 1
-    coeffs = np.empty((idx.size, len(recordings), n_c))
-    # the draw nearest the posterior median of μ0, for the plotted phases
+    phi_grid = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
+    proj = np.linalg.pinv(_fourier(phi_grid, n_harmonics))  # grid values -> coefficients
+    y_coeffs = np.empty((idx.size, len(recordings), n_c))
+    b_coeffs = np.empty((idx.size, len(recordings), n_c, len(BASIS)))
+    # a central draw (nearest the posterior median of μ0) for the plotted phases
     ref = int(np.argmin(np.abs(np.asarray(fit_.samples["mu0"])[idx]
                                - np.median(fit_.samples["mu0"]))))
-    phases, amp = [], np.empty(len(recordings))
+    phases = []
     for i, rec in enumerate(recordings.recordings):
         stride = max(1, rec.t.size // max_samples)
         z = np.stack([rec.channels[c][::stride] for c in recordings.planar], axis=-1)
@@ -217,21 +237,19 @@ def fit_channel(
         w = jnp.asarray(fit_.spec.frame.to_frame(z))
         phi = np.asarray(find(sites, jnp.asarray(feats.mu[i]), jnp.asarray(signs[i]), w))
         for d in range(idx.size):
-            coeffs[d, i] = np.linalg.lstsq(_basis(phi[d], n_harmonics), y, rcond=None)[0]
+            y_coeffs[d, i] = np.linalg.lstsq(_fourier(phi[d], n_harmonics), y, rcond=None)[0]
+        b = _basis_along_orbits(fit_, idx, feats.mu[i], signs[i], phi_grid)  # (d, 64, p)
+        b_coeffs[:, i] = np.einsum("cn,dnp->dcp", proj, b)
         phases.append((phi[ref], y))
-        amp[i] = np.ptp(coeffs[ref, i] @ _basis(np.linspace(0, 2 * np.pi, 256), n_harmonics).T)
-    if not np.all(np.isfinite(coeffs)):
+    if not (np.all(np.isfinite(y_coeffs)) and np.all(np.isfinite(b_coeffs))):
         raise FitError(f"channel {channel!r}: a recording lies off every predicted branch")
-    mu_t = fit_.spec.mu_tilde(feats.mu)
-    beta = np.zeros((idx.size, n_c, 3))
-    sigma = np.empty((idx.size, n_c))
+    beta = np.empty((idx.size, len(BASIS)))
+    sigma = np.empty(idx.size)
     for d in range(idx.size):
-        for j, k in enumerate(_orders(n_harmonics)):
-            x = _design(k, radii[d], mu_t)
-            cols = [0, 1, 2] if k == 0 else [0, 1]
-            b, s = _nig_draws(x[:, cols], coeffs[d, :, j], rng, 1)
-            beta[d, j, cols] = b[0]
-            sigma[d, j] = s[0]
+        beta[d], sigma[d] = _regression_draw(b_coeffs[d].reshape(-1, len(BASIS)),
+                                      y_coeffs[d].reshape(-1), rng)
+    amp = np.ptp(y_coeffs[ref] @ _fourier(np.linspace(0, 2 * np.pi, 256), n_harmonics).T,
+                 axis=-1)
     return ChannelFit(name=channel, units=recordings.recordings[0].units.get(channel, ""),
                       n_harmonics=n_harmonics, draw_index=idx, beta=beta, sigma=sigma,
-                      measured_coeffs=coeffs[ref], measured_amplitude=amp, phases=tuple(phases))
+                      measured_coeffs=y_coeffs[ref], measured_amplitude=amp, phases=tuple(phases))
