@@ -46,13 +46,15 @@ def _local_files(folder: Path, origin: str) -> list[Path]:
         what = "a file" if folder.exists() else "nothing"
         raise DataError(
             f"{folder}: flutter_cbc data folder ({origin}) holding the 7 CBC_*.mat files "
-            f"expected; found {what}"
+            f"expected; found {what} (to get them: flutter_cbc(download=True), or copy the "
+            "files of github.com/Kyounghyunlee/ML_Hopf src/measured_data into a folder)"
         )
     files = []
     for name, expected in FLUTTER_CBC_SHA256.items():
         path = folder / name
         if not path.is_file():
-            raise DataError(f"{name}: expected in the flutter_cbc folder {folder}; not found")
+            raise DataError(f"{name}: expected in the flutter_cbc folder {folder}; not found "
+                            "(flutter_cbc(download=True) fetches all 7)")
         try:
             found = _sha256(path)
         except OSError as exc:

@@ -87,7 +87,9 @@ def loo(log_lik) -> dict:
     ll = np.asarray(log_lik)
     idata = az.from_dict(posterior={"_": np.zeros((1, ll.shape[0]))},
                          log_likelihood={"obs": ll[None]})
-    res = az.loo(idata, pointwise=True)
+    with warnings.catch_warnings():  # large Pareto k is reported by the callers
+        warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
+        res = az.loo(idata, pointwise=True)
     return {
         "elpd": float(res["elpd_loo"]),
         "se": float(res["se"]),
@@ -103,7 +105,9 @@ def compare(log_liks: dict) -> dict:
                            log_likelihood={"obs": np.asarray(ll)[None]})
         for name, ll in log_liks.items()
     }
-    table = az.compare(data, ic="loo")
+    with warnings.catch_warnings():  # large Pareto k is reported by the callers
+        warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
+        table = az.compare(data, ic="loo")
     return {
         str(name): {
             "rank": int(row["rank"]),

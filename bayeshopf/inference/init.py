@@ -96,7 +96,8 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
         nf = _normal_form_from_gaps(spec, x0)
         r0 = np.asarray(normal_form.lco_radius(features.mu, *nf, sign))
         x0[2] = np.mean(np.log(a0) - np.log(r0))
-        sol = least_squares(resid, x0, method="lm")
+        with np.errstate(over="ignore", invalid="ignore"):  # trial steps may overflow
+            sol = least_squares(resid, x0, method="lm")
         if best is None or sol.cost < best.cost:
             best = sol
     if best is None or not np.isfinite(best.cost):

@@ -111,7 +111,7 @@ Each recording is held out in turn and the model refitted on the other six. Thre
 
 The figure is the paper's Fig. exp_val with bands; the star is the held-out recording (filled when
 inside the Bayesian 90% band). The last panel shows the fold of every fold."""),
-    new_code_cell("""folds = rs.names[3:5] if FAST else None
+    new_code_cell("""folds = rs.names[2:4] if FAST else None
 loo = leave_one_out(rs, "subcritical", seed=0, settings=settings, folds=folds, keep_fits=True,
                     progress=False)
 rows = ["| method | held-out inside 90% | mean held-out error | max error | sd of μ_SN over folds | μ_SN range |",
