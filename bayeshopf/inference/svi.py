@@ -30,6 +30,7 @@ def fit_svi(
     init_scale: float = 1e-2,
     n_draws: int = 1000,
     progress: bool = True,
+    obs_name: str = "coeffs",
 ) -> SviResult:
     """Variational posterior started at the MAP point.
 
@@ -49,6 +50,9 @@ def fit_svi(
         init_scale: Initial standard deviation of the guide.
         n_draws: Posterior draws to return.
         progress: Show a progress bar.
+        obs_name: Keyword argument of the model holding the observations; it is
+            set to ``None`` for the posterior predictive draws, which are
+            returned as ``<obs_name>_rep``.
 
     Returns:
         A :class:`SviResult` with ``n_draws`` posterior draws of every site.
@@ -64,9 +68,10 @@ def fit_svi(
     latent_draws = g.sample_posterior(k_draw, res.params, sample_shape=(n_draws,))
     # deterministic sites (mu0, a2, mu_fold, coeffs_hat) for every draw
     predictive = Predictive(model, posterior_samples=latent_draws, return_sites=None)
-    det = jax.jit(lambda k: predictive(k, **{**model_kwargs, "coeffs": None}))(k_draw)
+    det = jax.jit(lambda k: predictive(k, **{**model_kwargs, obs_name: None}))(k_draw)
     samples = {k: np.asarray(v) for k, v in {**latent_draws, **det}.items()}
-    samples["coeffs_rep"] = samples.pop("coeffs")  # posterior predictive draws of Φ(R)
+    if obs_name in samples:  # posterior predictive draws of the data (Φ(R) by default)
+        samples[f"{obs_name}_rep"] = samples.pop(obs_name)
     return SviResult(
         samples=samples,
         guide_params={k: np.asarray(v) for k, v in res.params.items()},
