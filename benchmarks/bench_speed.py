@@ -88,7 +88,7 @@ def cartesian_solve(p, mp, mu, sign, theta0, t, spec, mspec, rtol=1e-6):
         diffrax.ODETerm(field), diffrax.Tsit5(), t0=t[0], t1=t[-1], dt0=None, y0=u0,
         saveat=diffrax.SaveAt(ts=t), stepsize_controller=diffrax.PIDController(rtol=rtol,
                                                                                atol=rtol),
-        max_steps=100_000, throw=False,
+        max_steps=16384, throw=False,
     )
     return sol.ys, sol.stats["num_accepted_steps"]
 

@@ -195,7 +195,7 @@ def cmd_predict(args) -> int:
     saved = load_fit(args.fit_dir)
     iv = saved.predict(args.mu, args.branch, predictive=args.predictive)
     p = saved.p_exists(args.mu, args.branch)
-    freq = _frequency(saved, args.mu, args.branch)
+    freq = _frequency(saved, args.mu, args.branch, args.predictive)
     if args.json:
         out = {"mu": args.mu, "branch": args.branch, "amplitude": iv.to_json(),
                "p_exists": p, "units": saved.summary.get("amplitude_units", "")}
@@ -212,7 +212,7 @@ def cmd_predict(args) -> int:
     return 0
 
 
-def _frequency(saved, mu: float, branch: str):
+def _frequency(saved, mu: float, branch: str, predictive: bool = False):
     """Frequency interval (Hz) at μ when the fit folder has a speed model, else ``None``."""
     import numpy as np
 
@@ -223,7 +223,7 @@ def _frequency(saved, mu: float, branch: str):
     if loaded is None:
         return None
     spec, speed, maps = loaded
-    f = frequency_draws(spec, saved.spec, speed, maps, [mu], branch)[:, 0]
+    f = frequency_draws(spec, saved.spec, speed, maps, [mu], branch, predictive=predictive)[:, 0]
     f = f[np.isfinite(f)]
     return interval(f) if f.size else None
 

@@ -11,6 +11,13 @@ r"""The third training stage: the oscillation speed Ω from the measured time se
   (zp_ang) for the first measured point: one noisy sample fixes the phase only
   to about noise/radius, and a fixed wrong θ0 would be traded against a biased
   frequency over the window;
+* a frequency offset per recording, ``Ω_i = Ω + τ ε_i`` with
+  ``ε_i ~ Normal(0, 1)`` (site ``rec_omega``) and ``τ ~ HalfNormal(0.01|ω̄|)``
+  (site ``om_tau``): recordings at the same μ differ in frequency by more than
+  a smooth Ω(r, θ, μ) allows (control, drift, and at the fold the two branches
+  meet with one r but were measured with different frequencies). Like the
+  scatter σ of the map's features, τ makes the *predictive* frequency band
+  (where a new recording's frequency is expected); the *curve* band is Ω's;
 * noise ``σ_j ~ HalfNormal(0.2 ρ)`` per planar channel (frame units, ρ the orbit
   scale); it absorbs the measurement noise and the map's shape error;
 * likelihood ``w_i(t_k) ~ Normal(ŵ_i(t_k), σ)`` with
@@ -175,12 +182,15 @@ def _batched_trajectories(spec: sp.SpeedSpec, map_spec: ModelSpec):
     """Jitted ``(speed sites, map sites, μ, sign, θ0, t) ↦ ŵ`` for all recordings."""
 
     def build():
-        def f(om_sites, map_sites, mu, sign, theta0, t):
+        def f(om_sites, map_sites, mu, sign, theta0, t, offset):
             p = sp.speed_params_from_sites(om_sites, spec)
             mp = hybrid.params_from_sites(map_sites, map_spec)
-            return jax.vmap(
-                lambda m, s, th, tt: sp.trajectory_in_frame(p, mp, m, s, th, tt, spec, map_spec)
-            )(mu, sign, theta0, t)
+
+            def one(m, s, th, tt, d):
+                q = p._replace(omega0=p.omega0 + d)
+                return sp.trajectory_in_frame(q, mp, m, s, th, tt, spec, map_spec)
+
+            return jax.vmap(one)(mu, sign, theta0, t, offset)
 
         return f
 
@@ -215,9 +225,12 @@ def speed_model(spec: sp.SpeedSpec, map_spec: ModelSpec, map_sites: dict, mu, si
     sigma = numpyro.sample(
         "sigma_t", dist.HalfNormal(0.2 * map_spec.orbit_scale).expand([2]).to_event(1)
     )
+    sites["om_tau"] = numpyro.sample("om_tau", dist.HalfNormal(0.01 * abs(om_ref)))
     with numpyro.plate("recordings", mu.shape[0]):
         th0 = numpyro.sample("theta0", dist.Normal(theta0, THETA0_SD))
-    pred = _batched_trajectories(spec, map_spec)(sites, map_sites, mu, sign, th0, t)
+        eps = numpyro.sample("rec_omega", dist.Normal(0.0, 1.0))
+    pred = _batched_trajectories(spec, map_spec)(sites, map_sites, mu, sign, th0, t,
+                                                 sites["om_tau"] * eps)
     with numpyro.plate("recordings", mu.shape[0]), numpyro.handlers.scale(scale=weight):
         numpyro.sample("y", dist.Normal(pred, sigma).to_event(2), obs=y)
 
@@ -309,21 +322,24 @@ class SpeedFit:
     def _map_sites(self):
         return {k: jnp.asarray(v) for k, v in self.map_samples.items()}
 
-    def frequency(self, mu, branch: str = "stable") -> np.ndarray:
+    def frequency(self, mu, branch: str = "stable", predictive: bool = False) -> np.ndarray:
         """Draws of the LCO frequency ``f = 1/∮dθ/Ω`` in Hz, shape ``(n_draws, n_mu)``.
 
-        ``nan`` where a draw has no LCO on ``branch`` at μ.
+        ``predictive=True`` adds a new recording's offset ``τ ε`` to Ω (the band
+        where a new measurement's frequency is expected). ``nan`` where a draw
+        has no LCO on ``branch`` at μ.
         """
         return frequency_draws(self.spec, self.map_spec, self.samples, self.map_samples, mu,
-                               branch)
+                               branch, predictive=predictive, seed=self.seed)
 
-    def frequency_interval(self, mu: float, branch: str = "stable") -> Interval:
-        """Median and 90% interval of the frequency (Hz) at one μ."""
-        x = self.frequency(mu, branch)[:, 0]
+    def frequency_interval(self, mu: float, branch: str = "stable",
+                           predictive: bool = False) -> Interval:
+        """Median and 90% interval of the frequency (Hz) at one μ (curve or predictive)."""
+        x = self.frequency(mu, branch, predictive)[:, 0]
         return interval(x[np.isfinite(x)])
 
     def time_series(self, mu: float, branch: str, t, *, theta0=None,
-                    initial_point=None) -> np.ndarray:
+                    initial_point=None, omega_offset=None) -> np.ndarray:
         """Predicted planar time series in physical units, shape ``(n_draws, n_t, 2)``.
 
         Args:
@@ -334,6 +350,8 @@ class SpeedFit:
             initial_point: Measured point ``(z1, z2)`` at ``t[0]`` in physical
                 units; each map draw finds its own θ0 from it (eq. zp_ang).
                 Exactly one of ``theta0`` and ``initial_point`` must be given.
+            omega_offset: Per-draw offset added to ω0, shape ``(n_draws,)``
+                (e.g. a training recording's fitted ``τ ε_i``); default none.
         """
         if (theta0 is None) == (initial_point is None):
             raise ValueError("give exactly one of theta0 and initial_point")
@@ -351,23 +369,32 @@ class SpeedFit:
         th0 = jnp.asarray(0.0 if theta0 is None else float(theta0))
 
         def build():
-            def f(om_sites, map_sites, mu, th0, w1, t):
-                def one(o, m):
+            def f(om_sites, map_sites, mu, th0, w1, t, off):
+                def one(o, m, d):
                     p = sp.speed_params_from_sites(o, spec)
+                    p = p._replace(omega0=p.omega0 + d)
                     mp = hybrid.params_from_sites(m, mspec)
                     th = sp.initial_phase(mp, mu, sign, w1, mspec) if use_point else th0
                     w = sp.trajectory_in_frame(p, mp, mu, sign, th, t, spec, mspec)
                     return mspec.frame.from_frame(w)
 
-                return jax.vmap(one)(om_sites, map_sites)
+                return jax.vmap(one)(om_sites, map_sites, off)
 
             return f
 
         f = hybrid.jit_for_spec(mspec, f"speed-ts-{hash(spec)}-{sign}-{use_point}", build)
+        off = (jnp.zeros(self.n_draws) if omega_offset is None
+               else jnp.broadcast_to(jnp.asarray(omega_offset, dtype=float), (self.n_draws,)))
         return np.asarray(f(self._speed_sites(), self._map_sites(), jnp.asarray(float(mu)),
-                            th0, w1, t))
+                            th0, w1, t, off))
 
-    def phase_error(self, recordings: RecordingSet, n_periods: float = 10.0) -> np.ndarray:
+    def recording_offset(self, name: str) -> np.ndarray:
+        """Draws of the fitted frequency offset ``τ ε_i`` (rad/s) of training recording ``name``."""
+        i = self.data.names.index(name)
+        return np.asarray(self.samples["om_tau"]) * np.asarray(self.samples["rec_omega"])[:, i]
+
+    def phase_error(self, recordings: RecordingSet, n_periods: float = 10.0,
+                    *, fitted_offsets: bool = False) -> np.ndarray:
         """RMS phase error (rad) over the ``n_periods``-th period of each recording.
 
         Each recording is predicted from its first measured point
@@ -375,6 +402,8 @@ class SpeedFit:
         difference between the measured and the predicted angle about the frame
         centre, ``wrap(ang(w(t)) − ang(ŵ(t)))``, its median over draws, and the
         RMS over the samples of the last period before ``n_periods`` periods.
+        ``fitted_offsets=True`` uses each training recording's fitted frequency
+        offset (the model as fitted to that recording; the curve otherwise).
 
         Returns:
             One error per recording, shape ``(n_rec,)``.
@@ -388,7 +417,9 @@ class SpeedFit:
             t = r.t - r.t[0]
             stride = max(1, int(round(period_s / (40 * r.dt))))
             sel = np.flatnonzero(t <= n_periods * period_s)[::stride]
-            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0])
+            off = self.recording_offset(r.name) if fitted_offsets else None
+            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0],
+                                    omega_offset=off)
             wp = np.asarray(frame.to_frame(pred.reshape(-1, 2))).reshape(pred.shape)
             d = np.angle(np.exp(1j * (np.arctan2(w[sel, 1], w[sel, 0])[None]
                                       - np.arctan2(wp[..., 1], wp[..., 0]))))
@@ -401,7 +432,8 @@ class SpeedFit:
                           channel: int = 0) -> list[TimeSeriesBand]:
         """Median and 90% band of one channel over the first ``n_periods`` of each recording.
 
-        Each prediction starts from the recording's first measured point.
+        Each prediction starts from the recording's first measured point and
+        uses the recording's fitted frequency offset when it is a training one.
         """
         out = []
         for r in recordings:
@@ -410,17 +442,20 @@ class SpeedFit:
             t = r.t - r.t[0]
             stride = max(1, int(round(1.0 / (f * 60 * r.dt))))
             sel = np.flatnonzero(t <= n_periods / f)[::stride]
-            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0])[..., channel]
+            off = self.recording_offset(r.name) if r.name in self.data.names else None
+            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0],
+                                    omega_offset=off)[..., channel]
             q = np.nanquantile(pred, [0.5, 0.05, 0.95], axis=0)
             name = recordings.planar[channel]
             out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], t[sel],
                                       z[sel, channel], q[0], q[1], q[2]))
         return out
 
-    def frequency_band(self, mu, branch: str = "stable") -> FrequencyBand:
+    def frequency_band(self, mu, branch: str = "stable",
+                       predictive: bool = False) -> FrequencyBand:
         """Frequency median and 90% band on a μ grid (draws without an LCO are dropped)."""
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        x = self.frequency(mu, branch)
+        x = self.frequency(mu, branch, predictive)
         ok = np.isfinite(x).mean(axis=0) >= 0.5
         with np.errstate(all="ignore"):
             q = np.where(ok, np.nanquantile(np.where(np.isfinite(x), x, np.nan),
@@ -441,21 +476,28 @@ class SpeedFit:
 
 
 def frequency_draws(spec: sp.SpeedSpec, map_spec: ModelSpec, samples: dict, map_samples: dict,
-                    mu, branch: str = "stable") -> np.ndarray:
+                    mu, branch: str = "stable", *, predictive: bool = False,
+                    seed: int = 0) -> np.ndarray:
     """Frequency draws (Hz) ``(n_draws, n_mu)``: speed draw i with map draw i.
 
-    ``f = 1/T``, ``T = ∫₀^{2π} dθ/Ω(r_i(μ), θ, μ)`` (:func:`bayeshopf.model.speed.period`).
+    ``f = 1/T``, ``T = ∫₀^{2π} dθ/Ω(r_i(μ), θ, μ)`` (:func:`bayeshopf.model.speed.period`);
+    ``predictive=True`` replaces ω0 by ``ω0 + τ ε``, ``ε ~ Normal(0, 1)`` (a new recording).
     """
     sign = _sign(branch)
 
     def build():
-        def f(om_sites, map_sites, mu):
-            def one(o, m):
+        def f(om_sites, map_sites, mu, eps):
+            def one(o, m, e):
                 p = sp.speed_params_from_sites(o, spec)
                 mp = hybrid.params_from_sites(m, map_spec)
-                return jax.vmap(lambda x: sp.frequency_hz(p, mp, x, sign, spec, map_spec))(mu)
 
-            return jax.vmap(one)(om_sites, map_sites)
+                def at(x, ei):
+                    q = p._replace(omega0=p.omega0 + o["om_tau"] * ei)
+                    return sp.frequency_hz(q, mp, x, sign, spec, map_spec)
+
+                return jax.vmap(at)(mu, e)
+
+            return jax.vmap(one)(om_sites, map_sites, eps)
 
         return f
 
@@ -463,7 +505,10 @@ def frequency_draws(spec: sp.SpeedSpec, map_spec: ModelSpec, samples: dict, map_
     mu = jnp.atleast_1d(jnp.asarray(mu, dtype=float))
     om = {k: jnp.asarray(v) for k, v in samples.items() if k.startswith(("om", "omega"))}
     ms = {k: jnp.asarray(v) for k, v in map_samples.items()}
-    return np.asarray(f(om, ms, mu))
+    n = om["omega0"].shape[0]
+    eps = (jax.random.normal(jax.random.PRNGKey(seed), (n, mu.shape[0])) if predictive
+           else jnp.zeros((n, mu.shape[0])))
+    return np.asarray(f(om, ms, mu, eps))
 
 
 SPEED_DRAWS = "speed.npz"
@@ -550,6 +595,7 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     timings["prepare"] = time.perf_counter() - t0
     k_map, k_svi = jax.random.split(jax.random.PRNGKey(seed))
     init = {"omega0": omega_ref, "om_scale": 1e-3 * abs(omega_ref),
+            "om_tau": 1e-3 * abs(omega_ref), "rec_omega": np.zeros(len(data.mu)),
             "sigma_t": np.full(2, 0.05 * mspec.orbit_scale), "theta0": data.theta0}
     for i, (n_in, n_out) in enumerate(spec.nn_shapes):
         init[f"om_W{i}"] = 0.5 * np.asarray(
