@@ -87,3 +87,39 @@ def test_wind_tunnel_example_runs_in_fast_mode(tmp_path, recordings):
     assert set(summary["leave_one_out"]["summary"]) == {"bayes", "map", "ml"}
     for name in ("bifurcation.png", "leave_one_out.png", "actuator.png"):
         assert (tmp_path / "figures" / name).read_bytes()[:4] == b"\x89PNG"
+
+
+NOTEBOOK = REPO / "notebooks" / "03_wind_tunnel.ipynb"
+
+
+@pytest.mark.notebooks
+def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, recordings):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    copy = tmp_path / NOTEBOOK.name  # never execute (or overwrite) the stored notebook
+    copy.write_bytes(NOTEBOOK.read_bytes())
+    nb = nbformat.read(copy, as_version=4)
+    monkeypatch.setenv("BAYESHOPF_FAST", "1")
+    monkeypatch.setenv("BAYESHOPF_FLUTTER_CBC", str(CBC_DIR))
+    monkeypatch.delenv("MPLBACKEND", raising=False)
+    nbclient.NotebookClient(nb, timeout=1800, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: True" in text and "prefers the subcritical model" in text
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 4
+
+
+@pytest.mark.notebooks
+def test_stored_wind_tunnel_notebook_has_outputs_of_a_full_run():
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
+    outputs = [o for c in code for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: False" in text
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 4

@@ -88,5 +88,4 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
     ax.tick_params(labelsize=TICK_SIZE - 1)
     for ax in axes[n_rec + 1:]:
         ax.set_visible(False)
-    fig.tight_layout()
     return fig

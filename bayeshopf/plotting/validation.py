@@ -114,6 +114,7 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
                     ms=5, label={"map": "MAP only", "ml": "max. likelihood (paper)"}[m])
     ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=TICK_SIZE - 2,
                   rotation=45)
+    ax.set_xlim(-0.5, len(loo.folds) - 0.2)
     ax.set_xlabel("held-out recording (s: stable, u: unstable)", fontsize=LABEL_SIZE - 2)
     ax.set_ylabel(axis_label("fold μ_SN", mu_units), fontsize=LABEL_SIZE - 1)
     ax.set_title("fold per fold", fontsize=LABEL_SIZE - 1)
@@ -130,7 +131,6 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
         Line2D([], [], ls="none", marker="*", ms=11, mfc="gold", mec="k",
                label="held out (filled: inside 90%)"),
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=LEGEND_SIZE - 1,
-               frameon=False, bbox_to_anchor=(0.5, 0.0))
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=LEGEND_SIZE - 1,
+               frameon=False)
     return fig

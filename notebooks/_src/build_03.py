@@ -95,13 +95,13 @@ ppc = result.ppc()
 print(f"{int(ppc.covered.sum())}/{ppc.covered.size} training amplitudes inside their 90% predictive bands")
 fig = plot_bifurcation(result.diagram(diagram_grid(result)), ppc, mu_label="airspeed",
                        mu_units="m/s", amplitude_units="m")
-plt.show()"""),
+display(fig)"""),
     new_markdown_cell("""The bands are smooth between the recordings: the network that corrects the linear map has a
 learnt output scale whose prior is a tenth of the orbit size, so it cannot bend the diagram between
 data points unless the data ask for it. The phase portraits show 60 posterior orbits over the
 measured ones:"""),
-    new_code_cell("""fig = plot_phase_portraits(result, rs)
-plt.show()"""),
+    new_code_cell("""fig = plot_phase_portraits(result.samples, result.spec, rs)
+display(fig)"""),
     new_markdown_cell("""## 4. Leave-one-out: is the fit robust?
 
 Each recording is held out in turn and the model refitted on the other six. Three fits per fold:
@@ -131,7 +131,7 @@ for r in loo.table():
                 f"[{b['mu_fold']['ci90'][0]:.2f}, {b['mu_fold']['ci90'][1]:.2f}] | {r['ml']['mu_fold']['median']:.2f} |")
 display(Markdown("\\n".join(rows)))
 fig = plot_leave_one_out(loo, result.features)
-plt.show()"""),
+display(fig)"""),
     new_markdown_cell("""## 5. A third channel: the actuator command
 
 "Mapping to other coordinates": once U12 is fitted, every measured sample is placed on its
@@ -145,7 +145,7 @@ amp = np.array([np.nanquantile(channel.amplitude(result, [m], "unstable" if u el
 inside = (channel.measured_amplitude >= amp[:, 0]) & (channel.measured_amplitude <= amp[:, 1])
 print(f"actuator peak-to-peak inside its 90% band for {inside.sum()}/{inside.size} recordings")
 fig = plot_channel(channel, result)
-plt.show()"""),
+display(fig)"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={
