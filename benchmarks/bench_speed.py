@@ -170,7 +170,8 @@ def main(argv=None) -> int:
         "# Speed stage: integrating θ alone vs the Cartesian normal form",
         "",
         f"`python benchmarks/bench_speed.py` on {platform.machine()}, "
-        f"{os.cpu_count()} CPUs (shared), JAX {jax.__version__}, float64; "
+        f"{os.cpu_count()} CPUs (shared; load average {os.getloadavg()[0]:.1f} at the end), "
+        f"JAX {jax.__version__}, float64; "
         "7 recordings (4 stable, 3 unstable), 10 periods, 301 saved samples each, "
         "Tsit5 with rtol = atol = 1e-6, n_h = 1, an 8-neuron speed MLP.",
         "",
