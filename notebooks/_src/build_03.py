@@ -25,7 +25,8 @@ This notebook
 The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf). Set `BAYESHOPF_FLUTTER_CBC`
 to their folder, or call `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
 before starting the kernel for a quick run (short fits, two leave-one-out folds)."""),
-    new_code_cell("""import os
+    new_code_cell("""%matplotlib inline
+import os
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
 
