@@ -158,6 +158,7 @@ def wind_tunnel():
     return rs, hf, fit_speed(hf, rs, seed=0, progress=False)
 
 
+@pytest.mark.slow
 def test_wind_tunnel_frequency_and_phase(wind_tunnel):
     """Measured frequencies against their 90% bands; phase error after 10 periods.
 
