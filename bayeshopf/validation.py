@@ -220,10 +220,10 @@ def leave_one_out(
         A :class:`LeaveOneOut`.
     """
     settings = settings or FitSettings()
-    methods = tuple(m for m in METHODS if m in methods)
-    unknown = set(methods) ^ set(methods).intersection(METHODS)
+    unknown = set(methods) - set(METHODS)
     if unknown or not methods:
-        raise ValueError(f"methods must be among {METHODS}; got {methods!r}")
+        raise ValueError(f"methods must be among {METHODS}; got {tuple(methods)!r}")
+    methods = tuple(m for m in METHODS if m in methods)
     features = extract_features(rs, n_h=settings.n_h)
     names = list(rs.names) if folds is None else list(folds)
     out = []
