@@ -8,7 +8,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from bayeshopf.diagnostics.bifurcation import bifurcation_diagram
-from bayeshopf.errors import DataError
+from bayeshopf.errors import DataError, FitError
 from bayeshopf.features.orbits import OrbitFeatures
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
@@ -31,7 +31,7 @@ POINT_STYLES = {"map": ":", "ml": "-."}
 def _point_curve(fit_, mu, branch):
     try:
         return fit_.amplitude(mu, branch)[0]
-    except Exception:  # a supercritical point fit has no unstable branch
+    except FitError:  # a supercritical point fit has no unstable branch
         return np.full(np.shape(mu), np.nan)
 
 
