@@ -70,7 +70,7 @@ class PlanarFrame:
         *,
         centre: str = "mean",
     ) -> PlanarFrame:
-        """Frame from a list of orbits, each of shape ``(n_t, 2)``.
+        r"""Frame from a list of orbits, each of shape ``(n_t, 2)``.
 
         ``L = chol(2 C)`` with ``C`` the pooled within-orbit covariance (each
         orbit weighted equally).
@@ -81,7 +81,7 @@ class PlanarFrame:
             units: Their units.
             centre: ``"mean"``: ``c`` is the mean of the orbits' means;
                 ``"deepest"``: ``c`` is the point deepest inside every orbit,
-                :math:`\\arg\\min_z \\max_i (z - m_i)^T C_i^{-1} (z - m_i)`
+                :math:`\arg\min_z \max_i (z - m_i)^T C_i^{-1} (z - m_i)`
                 (module docstring).
 
         Raises:
