@@ -1,0 +1,21 @@
+"""Missing physics: where a simulator and LCO recordings disagree, and which term it lacks.
+
+Beside the main flow (the hybrid fit): :func:`analyse` compares recordings
+with a :class:`~bayeshopf.simulators.System`, locates the mismatch, gives
+every candidate term of a library of missing physics (stiffness, freeplay,
+friction and damping nonlinearities on each observed mechanical coordinate)
+a posterior probability and a coefficient with a 90% interval, adds the most
+probable one and shows the fit before and after, with a one-sentence verdict.
+``bayeshopf discrepancy DATA --simulator NAME --out DIR`` runs it from the
+shell; ``bayeshopf simulate ... --effect NAME --effect-value X`` plants a hidden
+effect in simulated recordings to test it blind.
+"""
+
+from bayeshopf.discrepancy.analysis import DiscrepancyReport as DiscrepancyReport
+from bayeshopf.discrepancy.analysis import analyse as analyse
+from bayeshopf.discrepancy.effects import effect_names as effect_names
+from bayeshopf.discrepancy.effects import simulate_with_effect as simulate_with_effect
+from bayeshopf.discrepancy.effects import with_effect as with_effect
+from bayeshopf.discrepancy.terms import KINDS as KINDS
+from bayeshopf.discrepancy.terms import Term as Term
+from bayeshopf.discrepancy.terms import library as library

@@ -1,0 +1,167 @@
+r"""Periodic orbits of a system at many (μ, parameter) points at once, warm-started.
+
+For recordings at :math:`\mu_1..\mu_R` the orbits are solved together: one
+vectorised (``jax.vmap``) shooting solve per Newton iteration integrates all
+:math:`R` orbits with their monodromy matrices. Newton's method solves, per
+orbit, :math:`\varphi_T(x_0) - x_0 = 0` and :math:`(x_0 - \hat x)\cdot f(\hat x) = 0`
+(:mod:`bayeshopf.simulators.periodic`) from a warm start
+:math:`(\hat x, \hat T)`. Changing a coefficient of the system is a
+*homotopy*: the orbits at the old value start the Newton solve at the new one,
+and an orbit that does not converge is retried in 4, then 16 smaller steps.
+An orbit is *lost* when it still does not converge, or when its Floquet
+stability no longer matches its branch label (it crossed a fold onto the
+other branch): that branch has no orbit at that μ for these parameters.
+
+The parameters are arguments of the compiled solver, so one compilation
+serves every coefficient value.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from bayeshopf.simulators.base import System
+from bayeshopf.simulators.periodic import floquet_stable, kernels
+
+__all__ = ["OrbitBatch", "solve_orbits", "track"]
+
+#: Samples per period of the solved orbits (enough for harmonics up to ~20).
+N_SAMPLES = 64
+_RTOL, _ATOL = 1e-9, 1e-12
+
+
+@functools.lru_cache(maxsize=16)
+def _batched(system: System):
+    k = kernels(system, _RTOL, _ATOL)
+    shoot = jax.jit(jax.vmap(k.shoot, in_axes=(0, 0, 0, None)))
+    f = jax.jit(jax.vmap(k.f, in_axes=(0, 0, None)))
+    return shoot, f, k.sample_batch
+
+
+@dataclass(frozen=True)
+class OrbitBatch:
+    """Orbits at ``R`` points.
+
+    Attributes:
+        x0: Orbit points, shape ``(R, n)``.
+        period: Periods, shape ``(R,)``.
+        mu: μ of each, shape ``(R,)``.
+        ok: Whether each orbit was found (on its branch), shape ``(R,)``.
+        states: Samples over one period, shape ``(R, N_SAMPLES, n)`` (NaN where lost).
+    """
+
+    x0: np.ndarray
+    period: np.ndarray
+    mu: np.ndarray
+    ok: np.ndarray
+    states: np.ndarray
+
+
+def _params(p: dict) -> dict:
+    return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in p.items()}
+
+
+def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
+                 max_iter: int = 20, tol: float = 1e-9) -> OrbitBatch:
+    """Newton's method for all orbits from the warm starts ``(x0, period)`` (module docstring).
+
+    Args:
+        system: The system (its compiled shooting is cached per system).
+        params: All parameters of the system by name.
+        x0: Warm-start points, shape ``(R, n)``.
+        period: Warm-start periods, shape ``(R,)``.
+        mu: μ of each orbit.
+        stable: Expected Floquet stability of each (its branch).
+        max_iter: Largest number of Newton steps.
+        tol: Convergence on the Newton step relative to the orbit's size.
+    """
+    shoot, f, sample = _batched(system)
+    p = _params(params)
+    xhat = np.array(x0, dtype=np.float64)
+    R, n = xhat.shape
+    mu = np.asarray(mu, dtype=np.float64)
+    fhat = np.asarray(f(jnp.asarray(xhat), jnp.asarray(mu), p))
+    x, T = xhat.copy(), np.array(period, dtype=np.float64)
+    done = np.zeros(R, bool)
+    alive = np.ones(R, bool)
+    mono = np.zeros((R, n, n))
+    for _ in range(max_iter):
+        out = np.asarray(shoot(jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p))
+        x1 = out[:, :n]
+        phi = out[:, n:n + n * n].reshape(R, n, n)
+        f1 = out[:, 2 * n + n * n:3 * n + n * n]
+        okr = (out[:, -1] > 0.5) & np.all(np.isfinite(out), axis=1)
+        alive &= okr | done
+        mono = np.where(done[:, None, None], mono, phi)
+        if done.all():
+            break
+        A = np.zeros((R, n + 1, n + 1))
+        A[:, :n, :n] = phi - np.eye(n)
+        A[:, :n, n] = f1
+        A[:, n, :n] = fhat
+        r = np.concatenate([x1 - x, np.einsum("ij,ij->i", x - xhat, fhat)[:, None]], axis=1)
+        act = alive & ~done
+        d = np.zeros((R, n + 1))
+        for i in np.nonzero(act)[0]:
+            try:
+                d[i] = np.linalg.solve(A[i], -r[i])
+            except np.linalg.LinAlgError:
+                alive[i] = False
+        x = np.where(act[:, None], x + d[:, :n], x)
+        T = np.where(act, T + d[:, n], T)
+        alive &= T > 0
+        small = (np.max(np.abs(d[:, :n]), axis=1) <= tol * (1 + np.max(np.abs(x), axis=1))) & (
+            np.abs(d[:, n]) <= tol * np.abs(T))
+        done |= act & small & alive
+        # the monodromy of the converged point: one more shot updates it (loop top)
+    ok = done & alive
+    for i in np.nonzero(ok)[0]:
+        if floquet_stable(np.linalg.eigvals(mono[i])) != bool(np.asarray(stable)[i]):
+            ok[i] = False
+    states = np.full((R, N_SAMPLES, n), np.nan)
+    if ok.any():
+        idx = np.nonzero(ok)[0]
+        s = np.asarray(sample(jnp.asarray(x[idx]), jnp.asarray(T[idx]), jnp.asarray(mu[idx]),
+                              p, N_SAMPLES))
+        states[idx] = s
+    return OrbitBatch(x0=x, period=T, mu=mu, ok=ok, states=states)
+
+
+def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch, stable
+          ) -> OrbitBatch:
+    """The orbits at ``params_to``, continued from ``start`` (at ``params_from``) by homotopy.
+
+    An orbit that is not found in one step is retried in 4, then 16 equal steps
+    of the parameters; one still not found (or ``start`` lost) is lost.
+    """
+    stable = np.asarray(stable, bool)
+    res = solve_orbits(system, params_to, start.x0, start.period, start.mu, stable)
+    x0, T, ok, states = res.x0.copy(), res.period.copy(), res.ok & start.ok, res.states.copy()
+    for n_sub in (4, 16):
+        bad = np.nonzero(~ok & start.ok)[0]
+        if bad.size == 0:
+            break
+        cx, cT = start.x0[bad].copy(), start.period[bad].copy()
+        alive = np.ones(bad.size, bool)
+        sub = None
+        for j in range(1, n_sub + 1):
+            w = j / n_sub
+            pj = {k: (1 - w) * float(params_from.get(k, 0.0)) + w * float(v)
+                  for k, v in params_to.items()}
+            sub = solve_orbits(system, pj, cx, cT, start.mu[bad], stable[bad])
+            alive &= sub.ok
+            cx = np.where(sub.ok[:, None], sub.x0, cx)
+            cT = np.where(sub.ok, sub.period, cT)
+            if not alive.any():
+                break
+        if sub is not None:
+            good = bad[alive]
+            x0[good], T[good], states[good] = cx[alive], cT[alive], sub.states[alive]
+            ok[good] = True
+    states[~ok] = np.nan
+    return OrbitBatch(x0=x0, period=T, mu=start.mu, ok=ok, states=states)

@@ -1,0 +1,295 @@
+r"""The library of candidate missing-physics terms.
+
+Every term is an additive generalised force on one mechanical coordinate
+:math:`q` of a :class:`~bayeshopf.simulators.System` with one unknown
+coefficient :math:`c`; the system integrates
+:math:`M\ddot q + D\dot q + Kq + N(q) = F_{\text{extra}}`
+(:meth:`~bayeshopf.simulators.System.with_extra_force`). **Sign convention:**
+the terms model restoring and dissipative forces that the simulator lacks, so
+a positive coefficient *adds* to the restoring or damping force:
+
+=====================  ==========================================  =================
+kind                   :math:`F_{\text{extra}}`                    coefficient unit
+=====================  ==========================================  =================
+quadratic_stiffness    :math:`-c\,q^2`                             F / [q]²
+cubic_stiffness        :math:`-c\,q^3`                             F / [q]³
+quintic_stiffness      :math:`-c\,q^5`                             F / [q]⁵
+freeplay               :math:`+k_q\,\mathrm{sat}_\varepsilon(q, \delta)`   [q] (the gap δ)
+coulomb_friction       :math:`-c\,\tanh(\dot q/\varepsilon_v)`     F
+quadratic_damping      :math:`-c\,\dot q\,|\dot q|_\varepsilon`    F / [q̇]²
+cubic_damping          :math:`-c\,\dot q^3`                        F / [q̇]³
+=====================  ==========================================  =================
+
+F is N for a translation (m) and N m for a rotation (rad). **Freeplay** is a
+dead band of half-width δ in the structural spring :math:`k_q`: the restoring
+force becomes :math:`k_q\,\mathrm{dz}(q, \delta)` (zero for :math:`|q|<\delta`,
+:math:`k_q(q \mp \delta)` outside), i.e.
+:math:`F_{\text{extra}} = k_q\,\mathrm{clip}(q, -\delta, \delta)`, smoothed as
+:math:`\mathrm{sat}_\varepsilon(q,\delta) =
+\tfrac12\big(\sqrt{(q+\delta)^2+\varepsilon^2} - \sqrt{(q-\delta)^2+\varepsilon^2}\big)`,
+which is exactly 0 at δ = 0 and differentiable in δ. Its unknown coefficient is
+the gap δ (≥ 0), and it needs
+the linear structural stiffness :math:`k_q` of the coordinate: a parameter
+named ``k_<coordinate>`` of the system (``k_h``, ``k_alpha`` for the
+aerofoil); a system without one gets no freeplay term (:func:`library` says
+so in :attr:`Library.skipped`). The smoothing widths are
+:math:`\varepsilon = 10^{-2}A_q` and :math:`\varepsilon_v = 10^{-2}V_q` with the
+typical displacement and velocity amplitudes :math:`A_q`, :math:`V_q = \omega A_q`.
+
+A wrong value of a term the simulator already has is that term: the aerofoil's
+:math:`k_{\alpha3}\alpha^3` and the added :math:`c\,\alpha^3` sum, so an error
+:math:`\Delta k_{\alpha3}` is ``alpha_cubic_stiffness`` with :math:`c = \Delta k_{\alpha3}`.
+
+**Prior scale.** Each coefficient gets a zero-mean normal prior (half-normal
+for the gap) whose scale :math:`s` makes the term's force at the typical
+amplitude 20% of the linear restoring force there, :math:`k_q A_q`:
+:math:`|F(s; A_q, V_q)| = 0.2\,k_q A_q`, e.g. :math:`s = 0.2\,k_q/A_q^2` for
+cubic stiffness, :math:`s = 0.2\,k_q A_q/V_q^3` for cubic damping,
+:math:`s = 0.2\,A_q` for the freeplay gap. A missing term larger than that
+would be a gross modelling error, not a hidden one; a much wider prior would
+only add an Occam penalty of :math:`\log` (width ratio) to every term alike.
+Coordinates are the system's ``coordinates`` that are observed states (the
+aerofoil's h and α; its aerodynamic lag state w is not a mechanical
+coordinate one could add a spring to).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import jax.numpy as jnp
+import numpy as np
+
+from bayeshopf.errors import BayesHopfError
+from bayeshopf.simulators.base import System
+
+__all__ = ["KINDS", "Library", "Term", "library", "library_system", "term_force"]
+
+#: The kinds of term, in the order they are listed.
+KINDS: tuple[str, ...] = (
+    "quadratic_stiffness", "cubic_stiffness", "quintic_stiffness", "freeplay",
+    "coulomb_friction", "quadratic_damping", "cubic_damping",
+)
+#: Fraction of the linear restoring force that a term of one prior scale gives.
+PRIOR_FRACTION = 0.2
+#: Smoothing widths relative to the typical amplitudes.
+SMOOTHING = 1e-2
+
+_PLAIN = {"quadratic_stiffness": "quadratic stiffness", "cubic_stiffness": "cubic stiffness",
+          "quintic_stiffness": "quintic stiffness", "freeplay": "freeplay",
+          "coulomb_friction": "Coulomb friction", "quadratic_damping": "quadratic damping",
+          "cubic_damping": "cubic damping"}
+_COORD_WORDS = {"h": "heave", "alpha": "pitch"}
+
+
+class TermError(BayesHopfError, ValueError):
+    """A term name or a system is not what the library accepts."""
+
+
+@dataclass(frozen=True)
+class Term:
+    r"""One candidate term: an extra force on one coordinate with one coefficient.
+
+    Attributes:
+        name: ``<coordinate>_<kind>`` (``"alpha_cubic_stiffness"``).
+        coordinate: The mechanical coordinate q it acts on.
+        kind: One of :data:`KINDS`.
+        units: Unit of the coefficient (``"N m/rad^3"``; the gap's unit for freeplay).
+        scale: Prior scale of the coefficient (module docstring).
+        stiffness: :math:`k_q` for freeplay, else 0.
+        eps: Smoothing width (displacement for freeplay, velocity for friction
+            and quadratic damping).
+        index: Position of q in ``system.coordinates``.
+    """
+
+    name: str
+    coordinate: str
+    kind: str
+    units: str
+    scale: float
+    stiffness: float = 0.0
+    eps: float = 0.0
+    index: int = 0
+
+    @property
+    def param(self) -> str:
+        """Name of the coefficient's parameter in :func:`library_system`."""
+        return f"dc_{self.name}"
+
+    @property
+    def positive(self) -> bool:
+        """Whether the coefficient is constrained to be ≥ 0 (the freeplay gap)."""
+        return self.kind == "freeplay"
+
+    @property
+    def plain(self) -> str:
+        """Plain words: ``"cubic stiffness in pitch"``."""
+        return f"{_PLAIN[self.kind]} in {_COORD_WORDS.get(self.coordinate, self.coordinate)}"
+
+    def force(self, q, qd, c):
+        r"""The generalised force :math:`F_{\text{extra}}(q, \dot q; c)` (module docstring)."""
+        return term_force(self.kind, q, qd, c, self.stiffness, self.eps)
+
+
+def term_force(kind: str, q, qd, c, stiffness: float = 0.0, eps: float = 1e-6):
+    r"""``F_extra`` of one kind of term at displacement ``q`` and velocity ``qd``.
+
+    Args:
+        kind: One of :data:`KINDS`.
+        q: Displacement of the coordinate.
+        qd: Its velocity.
+        c: The coefficient (the gap δ for freeplay).
+        stiffness: :math:`k_q` (freeplay only).
+        eps: Smoothing width (freeplay: of q; friction, quadratic damping: of q̇).
+    """
+    if kind == "quadratic_stiffness":
+        return -c * q**2
+    if kind == "cubic_stiffness":
+        return -c * q**3
+    if kind == "quintic_stiffness":
+        return -c * q**5
+    if kind == "freeplay":
+        sat = 0.5 * (jnp.sqrt((q + c) ** 2 + eps**2) - jnp.sqrt((q - c) ** 2 + eps**2))
+        return stiffness * sat
+    if kind == "coulomb_friction":
+        return -c * jnp.tanh(qd / eps)
+    if kind == "quadratic_damping":
+        return -c * qd * jnp.sqrt(qd**2 + eps**2)
+    if kind == "cubic_damping":
+        return -c * qd**3
+    raise TermError(f"term kind expected among {', '.join(KINDS)}; got {kind!r}")
+
+
+def _scale(kind: str, k: float, A: float, V: float) -> float:
+    """Prior scale: force at amplitude ``A``/``V`` equal to ``PRIOR_FRACTION·k·A``."""
+    f = PRIOR_FRACTION * k * A
+    return {"quadratic_stiffness": f / A**2, "cubic_stiffness": f / A**3,
+            "quintic_stiffness": f / A**5, "freeplay": PRIOR_FRACTION * A,
+            "coulomb_friction": f, "quadratic_damping": f / V**2,
+            "cubic_damping": f / V**3}[kind]
+
+
+def _units(kind: str, qu: str, fu: str) -> str:
+    vu = f"{qu}/s" if qu else "1/s"
+    pw = {"quadratic_stiffness": (qu, 2), "cubic_stiffness": (qu, 3),
+          "quintic_stiffness": (qu, 5), "quadratic_damping": (f"({vu})", 2),
+          "cubic_damping": (f"({vu})", 3)}
+    if kind == "freeplay":
+        return qu
+    if kind == "coulomb_friction":
+        return fu
+    u, n = pw[kind]
+    return f"{fu}/{u}^{n}" if u else fu
+
+
+@dataclass(frozen=True)
+class Library:
+    """The candidate terms of one system.
+
+    Attributes:
+        terms: The terms, by coordinate then kind.
+        skipped: ``name -> reason`` for terms left out (freeplay without a
+            known linear stiffness).
+        amplitude: Typical displacement amplitude :math:`A_q` per coordinate.
+        velocity: Typical velocity amplitude :math:`V_q` per coordinate.
+    """
+
+    terms: tuple[Term, ...]
+    skipped: Mapping[str, str] = field(default_factory=dict)
+    amplitude: Mapping[str, float] = field(default_factory=dict)
+    velocity: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the terms."""
+        return tuple(t.name for t in self.terms)
+
+    def __getitem__(self, name: str) -> Term:
+        for t in self.terms:
+            if t.name == name:
+                return t
+        raise TermError(f"term expected among {', '.join(self.names)}; got {name!r}")
+
+
+def _force_unit(qu: str) -> str:
+    return "N m" if qu == "rad" else ("N" if qu == "m" else "force")
+
+
+def library(system: System, amplitude: Mapping[str, float], frequency_hz: float, *,
+            kinds: tuple[str, ...] = KINDS) -> Library:
+    r"""The candidate terms for ``system``'s observed mechanical coordinates.
+
+    Args:
+        system: A system with ``coordinates`` and ``force_input``.
+        amplitude: Typical displacement amplitude (half peak-to-peak) per
+            coordinate, :math:`A_q`.
+        frequency_hz: Typical oscillation frequency; :math:`V_q = 2\pi f A_q`.
+        kinds: The kinds to include.
+
+    Raises:
+        TermError: If the system declares no extra-force input or no observed
+            coordinate.
+    """
+    if system.force_input is None or not system.coordinates:
+        raise TermError(f"{system.name}: a system with coordinates and force_input expected; "
+                        "found none (terms cannot be added to it)")
+    coords = [c for c in system.coordinates if c in system.observed]
+    if not coords:
+        raise TermError(f"{system.name}: an observed mechanical coordinate expected; "
+                        f"found coordinates {system.coordinates} and observed {system.observed}")
+    terms, skipped = [], {}
+    A_out, V_out = {}, {}
+    for c in coords:
+        qu = system.state_units[system.state_names.index(c)]
+        fu = _force_unit(qu)
+        A = float(amplitude[c])
+        V = 2 * np.pi * float(frequency_hz) * A
+        A_out[c], V_out[c] = A, V
+        k = system.params.get(f"k_{c}")
+        for kind in kinds:
+            name = f"{c}_{kind}"
+            if k is None:
+                if kind == "freeplay":
+                    skipped[name] = f"no linear stiffness parameter k_{c} in {system.name}"
+                    continue
+                kk = None
+            else:
+                kk = float(k)
+            if kk is None:  # scale from the force of a unit-less guess: keep it well defined
+                skipped[name] = f"no linear stiffness parameter k_{c} for the prior scale"
+                continue
+            eps = SMOOTHING * (A if kind == "freeplay" else V)
+            terms.append(Term(name=name, coordinate=c, kind=kind, units=_units(kind, qu, fu),
+                              scale=_scale(kind, kk, A, V),
+                              stiffness=kk if kind == "freeplay" else 0.0, eps=eps,
+                              index=system.coordinates.index(c)))
+    return Library(tuple(terms), skipped, A_out, V_out)
+
+
+def library_system(system: System, lib: Library) -> System:
+    r"""``system`` with every term of ``lib`` added, each with coefficient parameter ``dc_<name>``.
+
+    All coefficients default to 0, so the system equals ``system``; setting one
+    parameter switches one term on. One compiled solver then serves every term
+    and every coefficient value (parameters are arguments of the compiled
+    functions, not constants).
+    """
+    terms = lib.terms
+    n = len(system.coordinates)
+    pos = {c: system.state_names.index(c) for c in system.coordinates}
+    vel = {}
+    for c in system.coordinates:  # velocity state: "<c>_dot" by convention, else the next state
+        vel[c] = (system.state_names.index(f"{c}_dot") if f"{c}_dot" in system.state_names
+                  else pos[c] + 1)
+
+    def force(x, mu, p):
+        F = [0.0 * x[0] for _ in range(n)]
+        for t in terms:
+            q, qd = x[pos[t.coordinate]], x[vel[t.coordinate]]
+            F[t.index] = F[t.index] + t.force(q, qd, p[t.param])
+        return jnp.stack(F)
+
+    return system.with_extra_force(
+        force, name=f"{system.name}+library",
+        params={t.param: 0.0 for t in terms}, param_units={t.param: t.units for t in terms})
