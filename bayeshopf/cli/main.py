@@ -15,6 +15,7 @@ import time
 import traceback
 from pathlib import Path
 
+from bayeshopf.cli import discrepancy as _discrepancy
 from bayeshopf.cli import simulate as _simulate
 
 EXIT_USAGE = 2
@@ -78,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
 
     _simulate.add_parser(sub)
+    _discrepancy.add_parser(sub)
     return ap
 
 
@@ -228,7 +230,8 @@ def _frequency(saved, mu: float, branch: str, predictive: bool = False):
     return interval(f) if f.size else None
 
 
-COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict, "simulate": _simulate.run}
+COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict, "simulate": _simulate.run,
+            "discrepancy": _discrepancy.run}
 
 
 def main(argv: list[str] | None = None) -> int:

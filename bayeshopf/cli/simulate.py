@@ -38,6 +38,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="sampling rate in Hz (default 500)")
     s.add_argument("--seed", type=int, default=0, help="seed of phases and noise (default 0)")
     s.add_argument("--force", action="store_true", help="replace a non-empty output folder")
+    s.add_argument("--effect", default=None, metavar="NAME",
+                   help="plant a hidden effect: a library term <coordinate>_<kind> "
+                   "(e.g. alpha_cubic_stiffness, h_coulomb_friction) or delayed_aero (outside "
+                   "the library); the recordings carry no trace of it")
+    s.add_argument("--effect-value", type=float, default=None, metavar="X",
+                   help="size of the effect in the term's unit (required with --effect)")
+    s.add_argument("--truth-out", default=None, metavar="FILE",
+                   help="write the hidden effect and the true Hopf point and fold to this JSON "
+                   "file (with --effect nothing about the truth is written beside the data)")
     return s
 
 
@@ -81,6 +90,8 @@ def run(args) -> int:
         from bayeshopf.simulators import SimulationError
 
         raise SimulationError("--branch given without --mu; give the mu of each recording")
+    if args.effect is not None or args.effect_value is not None or args.truth_out:
+        return _run_effect(args, system, offsets, out)
     rs = simulate_recordings(system, args.mu, args.branch, noise=args.noise, offsets=offsets,
                              duration_s=args.duration, sample_rate_hz=args.rate, seed=args.seed)
     diagram = bifurcation_diagram(system)  # cached: the one the recordings were sampled from
@@ -107,4 +118,47 @@ def run(args) -> int:
     print(f"wrote {out}/ ({len(rs)} recordings of {', '.join(system.observed)}, "
           f"{args.duration:g} s at {args.rate:g} Hz, {100 * args.noise:g}% noise; "
           "simulation.json holds the truth)")
+    return 0
+
+
+def _run_effect(args, system, offsets, out: Path) -> int:
+    """``--effect``: recordings with a hidden effect; the truth only in ``--truth-out``."""
+    import json
+    import os
+    import uuid
+
+    from bayeshopf.discrepancy.effects import simulate_with_effect, truth_points
+    from bayeshopf.errors import OutputError
+    from bayeshopf.simulators import SimulationError, write_simulation
+
+    if args.effect is None or args.effect_value is None:
+        raise SimulationError("--effect and --effect-value go together; expected both, got "
+                              + ("--effect" if args.effect else "--effect-value"
+                                 if args.effect_value is not None else "--truth-out")
+                              + " alone")
+    truth_path = Path(args.truth_out) if args.truth_out else None
+    if truth_path is not None:
+        if truth_path.exists() and not args.force:
+            raise OutputError(f"{truth_path}: a new file expected for --truth-out; found an "
+                              "existing one (use --force to replace it)")
+        if truth_path.resolve().parent == out.resolve() or out.resolve() in \
+                truth_path.resolve().parents:
+            raise OutputError(f"{truth_path}: --truth-out outside the data folder expected; "
+                              f"found it inside {out}")
+    rs, truth = simulate_with_effect(system, args.effect, args.effect_value, args.mu,
+                                     args.branch, noise=args.noise, offsets=offsets,
+                                     duration_s=args.duration, sample_rate_hz=args.rate,
+                                     seed=args.seed)
+    write_simulation(rs, out, info=None, overwrite=args.force)
+    if truth_path is not None:
+        truth.update(truth_points(system, args.effect, args.effect_value))
+        truth.update(offsets=offsets, noise=args.noise, seed=args.seed,
+                     recordings=[{"name": r.name, "mu": r.mu, "branch": r.branch} for r in rs])
+        tmp = truth_path.parent / f".{truth_path.name}.{uuid.uuid4().hex[:8]}"
+        truth_path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
+        os.replace(tmp, truth_path)
+    print(f"wrote {out}/ ({len(rs)} recordings of {', '.join(system.observed)} with a hidden "
+          f"effect, {args.duration:g} s at {args.rate:g} Hz, {100 * args.noise:g}% noise)"
+          + (f"; the truth is in {truth_path}" if truth_path else "; the truth is not written"))
     return 0

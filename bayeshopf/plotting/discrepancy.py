@@ -1,0 +1,142 @@
+"""Figures of a discrepancy analysis: bifurcation diagram before and after, orbit residuals."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from bayeshopf.plotting._io import save_figure
+from bayeshopf.plotting._style import (
+    BRANCH_COLOURS,
+    BRANCH_MARKERS,
+    LABEL_SIZE,
+    LEGEND_SIZE,
+    TITLE_SIZE,
+    new_figure,
+    style_axes,
+)
+
+__all__ = ["plot_discrepancy", "plot_discrepancy_diagram", "plot_orbit_residuals"]
+
+
+def _branch_curves(diagram, channel: str):
+    for b in diagram.branches:
+        yield b.kind, np.asarray(b.mu), np.asarray(b.amplitude[channel])
+
+
+def plot_discrepancy_diagram(report):
+    """Peak-to-peak of the reference channel against μ: simulator, simulator + term, recordings.
+
+    The recordings' amplitudes are the measured ones (offsets do not change a
+    peak-to-peak); the Bayesian hybrid fit's 90% band is drawn when the
+    analysis ran it.
+    """
+    mf = report.extras["features"]
+    ch = mf.layout.channels[0]
+    system = report.system
+    fig = new_figure(6.0, 4.0)
+    ax = fig.add_subplot()
+    before, after = report.extras["before"], report.extras["after"]
+    hyb = report.extras.get("hybrid")
+    if hyb is not None:
+        try:
+            bd = hyb.diagram()
+            for band, kind in ((bd.stable, "stable"), (bd.unstable, "unstable")):
+                if band is None:
+                    continue
+                ax.fill_between(band.mu, band.quantiles[0], band.quantiles[-1], color="0.85",
+                                lw=0, label="hybrid fit, 90% band" if kind == "stable" else None)
+        except Exception:  # noqa: BLE001 - the band is an extra; the figure stands without it
+            pass
+    for kind, mu, amp in _branch_curves(before["diagram"], ch):
+        ax.plot(mu, amp, color="0.2", ls="-" if kind == "stable" else "--", lw=1.2,
+                label="simulator (stable, unstable dashed)" if kind == "stable" else None)
+    term = report.data["fit"]["after"]["term"]
+    if after.get("diagram") is not None:
+        for kind, mu, amp in _branch_curves(after["diagram"], ch):
+            ax.plot(mu, amp, color="C2", ls="-" if kind == "stable" else "--", lw=1.5,
+                    label=f"simulator + {term}" if kind == "stable" else None)
+    for b in ("stable", "unstable"):
+        sel = np.array([x == b for x in mf.branch])
+        if sel.any():
+            ax.plot(mf.mu[sel], 2 * mf.amplitude[sel, 0], BRANCH_MARKERS[b], ms=6,
+                    mfc=BRANCH_COLOURS[b] if b == "stable" else "none",
+                    mec=BRANCH_COLOURS[b], label=f"recordings ({b})", ls="none")
+    u = system.parameter_units
+    ax.set_xlabel(f"{system.parameter_label} {system.parameter}" + (f" ({u})" if u else ""),
+                  fontsize=LABEL_SIZE)
+    cu = system.observed_units.get(ch, "")
+    ax.set_ylabel(f"{ch} peak-to-peak" + (f" ({cu})" if cu else ""), fontsize=LABEL_SIZE)
+    ax.set_title(report.data["verdict"]["kind"] + ": " + ", ".join(
+        report.data["verdict"]["terms"] or ["no term named"]), fontsize=TITLE_SIZE)
+    lo = min(mf.mu.min(), before["fold"] or mf.mu.min()) - 0.5
+    hi = max(mf.mu.max(), before["hopf"] or mf.mu.max()) + 0.5
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0, 1.3 * 2 * mf.amplitude[:, 0].max())
+    style_axes(ax)
+    ax.legend(fontsize=LEGEND_SIZE, loc="upper left")
+    return fig
+
+
+def plot_orbit_residuals(report):
+    """Residual along the orbit (measured − simulated, offsets removed), before and after.
+
+    One row per recording, one column per channel; the residual is in units of
+    the channel and the grey band is ± the model-error floor plus noise of the
+    first harmonic.
+    """
+    from bayeshopf.discrepancy.locate import N_THETA, curve
+
+    mf = report.extras["features"]
+    fitter = report.extras["fitter"]
+    lay = mf.layout
+    base = report.extras["base"]
+    best = report.fits[0]
+    ys0 = fitter.features(base)
+    ys1 = fitter.features(best.orbits)
+    off0, off1 = fitter.offsets(base), fitter.offsets(best.orbits)
+    R, C = len(mf.names), len(lay.channels)
+    fig = new_figure(2.6 * C + 0.5, 1.05 * R + 0.6)
+    axes = fig.subplots(R, C, sharex=True, squeeze=False)
+    th = 360.0 * np.arange(N_THETA) / N_THETA
+    term = best.term.name
+    for r in range(R):
+        for j, c in enumerate(lay.channels):
+            ax = axes[r, j]
+            zm = curve(lay, mf.y[r], c)
+            s = fitter.sigma[r, lay.labels.index(f"{c}:Re1")]
+            ax.axhspan(-2 * s, 2 * s, color="0.88", lw=0)
+            if base.ok[r]:
+                ax.plot(th, zm - off0[c] - curve(lay, ys0[r], c), color="0.3", lw=1,
+                        label="simulator")
+            if best.orbits.ok[r]:
+                ax.plot(th, zm - off1[c] - curve(lay, ys1[r], c), color="C2", lw=1.2,
+                        label=f"+ {term}")
+            ax.axhline(0, color="0.6", lw=0.5)
+            style_axes(ax, grid=False)
+            if r == 0:
+                u = report.system.observed_units.get(c, "")
+                ax.set_title(f"{c} residual" + (f" ({u})" if u else ""), fontsize=TITLE_SIZE)
+            if j == 0:
+                ax.set_ylabel(f"{mf.branch[r][0]} {mf.mu[r]:g}", fontsize=LABEL_SIZE - 1)
+            ax.tick_params(labelsize=6.5)
+    for ax in axes[-1]:
+        ax.set_xlabel("phase (°)", fontsize=LABEL_SIZE)
+        ax.set_xticks([0, 90, 180, 270, 360])
+    handles, labels = [], []
+    for ax in axes.ravel():
+        for h_, l_ in zip(*ax.get_legend_handles_labels(), strict=True):
+            if l_ not in labels:
+                handles.append(h_)
+                labels.append(l_)
+    fig.legend(handles, labels, fontsize=LEGEND_SIZE, loc="outside upper center", ncols=2)
+    return fig
+
+
+def plot_discrepancy(report, folder: str | os.PathLike[str]) -> list[Path]:
+    """Write ``bifurcation_diagram.png`` and ``orbit_residuals.png`` into ``folder``."""
+    folder = Path(folder)
+    return [save_figure(plot_discrepancy_diagram(report), folder / "bifurcation_diagram.png"),
+            save_figure(plot_orbit_residuals(report), folder / "orbit_residuals.png")]
