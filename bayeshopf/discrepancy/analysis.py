@@ -44,7 +44,7 @@ from bayeshopf.discrepancy.features import DEFAULT_K, measure
 from bayeshopf.discrepancy.locate import locate
 from bayeshopf.discrepancy.orbits import OrbitBatch, solve_orbits
 from bayeshopf.discrepancy.select import Fitter, TermFit, null_log_z, probabilities
-from bayeshopf.discrepancy.terms import KINDS, library, library_system
+from bayeshopf.discrepancy.terms import KINDS, library, library_params, library_system
 from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.registry import get_system
@@ -181,7 +181,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     L = library_system(system, lib)
     diagram, x0, T, notes = _base_warm_starts(system, recordings)
     stable = np.array([b == "stable" for b in mf.branch])
-    base = solve_orbits(L, dict(L.params), x0, T, mf.mu, stable)
+    base = solve_orbits(L, {**L.params, **library_params(lib)}, x0, T, mf.mu, stable)
     fitter = Fitter(L, lib, mf, base)
     lz0, e0 = null_log_z(fitter)
     fits = []
@@ -224,7 +224,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
                   "fold": float(diagram.folds[0].mu) if diagram.folds else None,
                   "diagram": diagram}
     if not best_is_none:
-        after_pts = _points(L.with_params(**{t.param: best.median}))
+        after_pts = _points(L.with_params(**library_params(lib), **{t.param: best.median}))
     # ------------------------------------------------------------- ELPD
     draws = best.draws(N_DRAWS, seed)
     ll_after = np.stack([_loglik(best.e_mode + best.jac * (c - best.mode)) for c in draws])

@@ -56,7 +56,7 @@ import numpy as np
 
 from bayeshopf.discrepancy.features import MeasuredFeatures, simulated
 from bayeshopf.discrepancy.orbits import OrbitBatch, track
-from bayeshopf.discrepancy.terms import Library, Term
+from bayeshopf.discrepancy.terms import Library, Term, library_params
 from bayeshopf.simulators.base import System
 
 __all__ = ["FLOOR_FREQ", "FLOOR_REL", "Fitter", "TermFit"]
@@ -126,7 +126,7 @@ class Fitter:
 
     def __init__(self, system: System, lib: Library, mf: MeasuredFeatures, base: OrbitBatch):
         self.system, self.lib, self.mf, self.base = system, lib, mf, base
-        self.params0 = dict(system.params)
+        self.params0 = {**system.params, **library_params(lib)}
         self.stable = np.array([b == "stable" for b in mf.branch])
         lay = mf.layout
         self.obs = [system.state_names.index(c) for c in lay.channels]

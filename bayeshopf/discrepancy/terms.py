@@ -55,6 +55,7 @@ coordinate one could add a spring to).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -267,15 +268,34 @@ def library(system: System, amplitude: Mapping[str, float], frequency_hz: float,
     return Library(tuple(terms), skipped, A_out, V_out)
 
 
+def library_params(lib: Library) -> dict[str, float]:
+    """The values of the smoothing widths and stiffnesses of ``lib`` as system parameters."""
+    out = {}
+    for t in lib.terms:
+        out[f"eps_{t.name}"] = t.eps
+        out[f"k_{t.name}"] = t.stiffness
+    return out
+
+
 def library_system(system: System, lib: Library) -> System:
     r"""``system`` with every term of ``lib`` added, each with coefficient parameter ``dc_<name>``.
 
     All coefficients default to 0, so the system equals ``system``; setting one
     parameter switches one term on. One compiled solver then serves every term
-    and every coefficient value (parameters are arguments of the compiled
-    functions, not constants).
+    and every coefficient value: coefficients, smoothing widths (``eps_<name>``)
+    and freeplay stiffnesses (``k_<name>``) are parameters, arguments of the
+    compiled functions, and the system is cached per base system and term names,
+    so a second analysis with other amplitudes compiles nothing.
     """
-    terms = lib.terms
+    base = _library_system(system, tuple((t.name, t.kind, t.coordinate, t.index)
+                                         for t in lib.terms))
+    return base
+
+
+@functools.lru_cache(maxsize=8)
+def _library_system(system: System, spec: tuple) -> System:
+    terms = [Term(name=n, coordinate=c, kind=k, units="", scale=1.0, index=i)
+             for n, k, c, i in spec]
     n = len(system.coordinates)
     pos = {c: system.state_names.index(c) for c in system.coordinates}
     vel = {}
@@ -287,9 +307,11 @@ def library_system(system: System, lib: Library) -> System:
         F = [0.0 * x[0] for _ in range(n)]
         for t in terms:
             q, qd = x[pos[t.coordinate]], x[vel[t.coordinate]]
-            F[t.index] = F[t.index] + t.force(q, qd, p[t.param])
+            F[t.index] = F[t.index] + term_force(t.kind, q, qd, p[t.param], p[f"k_{t.name}"],
+                                                 p[f"eps_{t.name}"])
         return jnp.stack(F)
 
-    return system.with_extra_force(
-        force, name=f"{system.name}+library",
-        params={t.param: 0.0 for t in terms}, param_units={t.param: t.units for t in terms})
+    params = {t.param: 0.0 for t in terms}
+    params.update({f"eps_{t.name}": 1e-6 for t in terms})
+    params.update({f"k_{t.name}": 0.0 for t in terms})
+    return system.with_extra_force(force, name=f"{system.name}+library", params=params)
