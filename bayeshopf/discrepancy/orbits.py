@@ -21,12 +21,13 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.simulators.base import System
-from bayeshopf.simulators.periodic import floquet_stable, kernels
+from bayeshopf.simulators.periodic import floquet_stable
 
 __all__ = ["OrbitBatch", "solve_orbits", "track"]
 
@@ -35,12 +36,48 @@ N_SAMPLES = 64
 _RTOL, _ATOL = 1e-9, 1e-12
 
 
+#: Largest number of solver steps per period: an orbit needs about a hundred; a
+#: Newton iterate that blows up stops here instead of costing 65536 steps.
+_MAX_STEPS = 4096
+
+
 @functools.lru_cache(maxsize=16)
 def _batched(system: System):
-    k = kernels(system, _RTOL, _ATOL)
-    shoot = jax.jit(jax.vmap(k.shoot, in_axes=(0, 0, 0, None)))
-    f = jax.jit(jax.vmap(k.f, in_axes=(0, 0, None)))
-    return shoot, f, k.sample_batch
+    """Vectorised shooting (state, monodromy, f at the end) and sampling of one system."""
+    rhs = system.rhs
+    jac_x = jax.jacfwd(rhs, argnums=0)
+    solver = diffrax.Dopri8()
+    ctrl = diffrax.PIDController(rtol=_RTOL, atol=_ATOL)
+
+    def aug(s, y, args):
+        x, phi = y
+        T, mu, p = args
+        return T * rhs(x, mu, p), T * (jac_x(x, mu, p) @ phi)
+
+    def shoot(x0, T, mu, p):
+        n = x0.shape[0]
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(aug), solver, 0.0, 1.0, None, (x0, jnp.eye(n)), args=(T, mu, p),
+            stepsize_controller=ctrl, saveat=diffrax.SaveAt(t1=True), max_steps=_MAX_STEPS,
+            throw=False)
+        x1, phi = (leaf[-1] for leaf in sol.ys)
+        ok = (sol.result == diffrax.RESULTS.successful).astype(x0.dtype)
+        return jnp.concatenate([x1, phi.ravel(), jnp.zeros(n), rhs(x1, mu, p), ok[None]])
+
+    def field_(s, x, args):
+        T, mu, p = args
+        return T * rhs(x, mu, p)
+
+    def sample(x0, T, mu, p, n):
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field_), solver, 0.0, 1.0, None, x0, args=(T, mu, p),
+            stepsize_controller=ctrl, saveat=diffrax.SaveAt(ts=jnp.arange(n) / n),
+            max_steps=_MAX_STEPS, throw=False)
+        return sol.ys
+
+    return (jax.jit(jax.vmap(shoot, in_axes=(0, 0, 0, None))),
+            jax.jit(jax.vmap(rhs, in_axes=(0, 0, None))),
+            jax.jit(jax.vmap(sample, in_axes=(0, 0, 0, None, None)), static_argnums=4))
 
 
 @dataclass(frozen=True)
@@ -112,6 +149,10 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
                 d[i] = np.linalg.solve(A[i], -r[i])
             except np.linalg.LinAlgError:
                 alive[i] = False
+        # limit a step to a fifth of the orbit's size: a wild iterate would blow up
+        size = np.max(np.abs(xhat), axis=1) + 1e-12
+        big = np.max(np.abs(d[:, :n]), axis=1) / (0.2 * size)
+        d = d / np.maximum(big, 1.0)[:, None]
         x = np.where(act[:, None], x + d[:, :n], x)
         T = np.where(act, T + d[:, n], T)
         alive &= T > 0
