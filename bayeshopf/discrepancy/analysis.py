@@ -147,7 +147,8 @@ def _loglik(e: np.ndarray) -> np.ndarray:
 
 def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             hybrid: bool = True, progress: bool = False, K: int = DEFAULT_K,
-            kinds: tuple[str, ...] = KINDS, hybrid_settings=None) -> DiscrepancyReport:
+            kinds: tuple[str, ...] = KINDS, hybrid_settings=None,
+            point_intervals: bool = True) -> DiscrepancyReport:
     """Compare recordings with a simulator, locate and name what it lacks (module docstring).
 
     Args:
@@ -160,6 +161,10 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
         K: Harmonics per channel.
         kinds: Kinds of term in the library.
         hybrid_settings: :class:`~bayeshopf.pipeline.FitSettings` of the hybrid fit.
+        point_intervals: Also continue the simulator with the term at the ends of
+            its coefficient's 90% interval, for 90% intervals of its Hopf point
+            and fold (two more continuations; the points are monotone in one
+            coefficient over so short an interval).
 
     Raises:
         BayesHopfError: Bad recordings, an unknown simulator, or one without
@@ -225,6 +230,13 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
                   "diagram": diagram}
     if not best_is_none:
         after_pts = _points(L.with_params(**library_params(lib), **{t.param: best.median}))
+        if point_intervals:
+            ends = [_points(L.with_params(**library_params(lib), **{t.param: c}))
+                    for c in best.ci90]
+            for k in ("hopf", "fold"):
+                v = [e[k] for e in ends]
+                if all(x is not None for x in v) and after_pts[k] is not None:
+                    after_pts[f"{k}_ci90"] = sorted(v)
     # ------------------------------------------------------------- ELPD
     draws = best.draws(N_DRAWS, seed)
     ll_after = np.stack([_loglik(best.e_mode + best.jac * (c - best.mode)) for c in draws])
@@ -241,7 +253,8 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     fit_before.update(hopf=before_pts["hopf"], fold=before_pts["fold"], chi2=chi0, dof=dof0,
                       p_value=p_before)
     fit_after.update(term=t.name, coefficient=best.median, hopf=after_pts["hopf"],
-                     fold=after_pts["fold"], chi2=chi1, dof=dof0 - 1, p_value=p_after,
+                     fold=after_pts["fold"], hopf_ci90=after_pts.get("hopf_ci90"),
+                     fold_ci90=after_pts.get("fold_ci90"), chi2=chi1, dof=dof0 - 1, p_value=p_after,
                      elpd_difference=elpd_diff, elpd_difference_se=elpd_se,
                      note=after_pts.get("note"))
 
@@ -348,6 +361,9 @@ def _markdown(d: dict) -> str:
             return "–"
         return f"{100 * x:.2f}%" if pct else f"{x:.4g}"
 
+    def ci(v):
+        return "" if not v else f" (90% {v[0]:.4g} – {v[1]:.4g})"
+
     lines += ["", f"## Fit before and after adding {fa['term']}", "",
               "| quantity | before | after |", "|---|---:|---:|"]
     for c in fb["rms_orbit_error"]:
@@ -357,8 +373,8 @@ def _markdown(d: dict) -> str:
                      f"{g(fa['amplitude_error'][c], True)} |")
     lines += [f"| frequency error | {g(fb['frequency_error'], True)} | "
               f"{g(fa['frequency_error'], True)} |",
-              f"| Hopf point | {g(fb['hopf'])} | {g(fa['hopf'])} |",
-              f"| fold | {g(fb['fold'])} | {g(fa['fold'])} |",
+              f"| Hopf point | {g(fb['hopf'])} | {g(fa['hopf'])}{ci(fa.get('hopf_ci90'))} |",
+              f"| fold | {g(fb['fold'])} | {g(fa['fold'])}{ci(fa.get('fold_ci90'))} |",
               f"| chi² / features | {fb['chi2']:.1f} / {fb['dof']} | {fa['chi2']:.1f} / "
               f"{fa['dof']} |"]
     if fa.get("elpd_difference") is not None:
