@@ -33,6 +33,7 @@ the :math:`\chi^2` distribution with as many degrees of freedom as features
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -121,8 +122,17 @@ def _points(system: System) -> dict:
         d = continue_from_hopf(system)
     except BayesHopfError as exc:
         return {"hopf": None, "fold": None, "note": str(exc), "diagram": None}
-    return {"hopf": float(d.hopf.mu), "fold": float(d.folds[0].mu) if d.folds else None,
+    return {"hopf": float(d.hopf.mu), "fold": _fold(d), "folds": [float(f.mu) for f in d.folds],
             "diagram": d}
+
+
+def _fold(d) -> float | None:
+    """The fold of the LCO branch at the lowest μ (the saddle-node where the stable LCOs end).
+
+    Smoothed nonsmooth terms can add tiny folds near the Hopf point; the
+    engineering quantity is the lowest airspeed with an LCO.
+    """
+    return min(float(f.mu) for f in d.folds) if d.folds else None
 
 
 def _fit_errors(fitter: Fitter, ob: OrbitBatch, loc: list[dict]) -> dict:
@@ -226,7 +236,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     # ------------------------------------------------- model: the term added
     after_pts = {"hopf": None, "fold": None, "diagram": None}
     before_pts = {"hopf": float(diagram.hopf.mu),
-                  "fold": float(diagram.folds[0].mu) if diagram.folds else None,
+                  "fold": _fold(diagram), "folds": [float(f.mu) for f in diagram.folds],
                   "diagram": diagram}
     if not best_is_none:
         after_pts = _points(L.with_params(**library_params(lib), **{t.param: best.median}))
@@ -242,7 +252,9 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     ll_after = np.stack([_loglik(best.e_mode + best.jac * (c - best.mode)) for c in draws])
     ll_before = np.tile(_loglik(e0), (N_DRAWS, 1))
     try:
-        cmp = arviz_io.compare({"before": ll_before, "after": ll_after})
+        with warnings.catch_warnings():  # the model without a term has one point: k is nan
+            warnings.simplefilter("ignore", RuntimeWarning)
+            cmp = arviz_io.compare({"before": ll_before, "after": ll_after})
         elpd_diff = cmp["after"]["elpd_loo"] - cmp["before"]["elpd_loo"]
         elpd_se = max(cmp["before"]["dse"], cmp["after"]["dse"])
     except Exception:  # noqa: BLE001 - arviz may refuse degenerate inputs; report without it
@@ -250,10 +262,12 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
 
     fit_before = _fit_errors(fitter, base, loc0)
     fit_after = _fit_errors(fitter, best.orbits, loc1)
-    fit_before.update(hopf=before_pts["hopf"], fold=before_pts["fold"], chi2=chi0, dof=dof0,
+    fit_before.update(hopf=before_pts["hopf"], fold=before_pts["fold"],
+                      folds=before_pts["folds"], chi2=chi0, dof=dof0,
                       p_value=p_before)
     fit_after.update(term=t.name, coefficient=best.median, hopf=after_pts["hopf"],
-                     fold=after_pts["fold"], hopf_ci90=after_pts.get("hopf_ci90"),
+                     fold=after_pts["fold"], folds=after_pts.get("folds"),
+                     hopf_ci90=after_pts.get("hopf_ci90"),
                      fold_ci90=after_pts.get("fold_ci90"), chi2=chi1, dof=dof0 - 1, p_value=p_after,
                      elpd_difference=elpd_diff, elpd_difference_se=elpd_se,
                      note=after_pts.get("note"))

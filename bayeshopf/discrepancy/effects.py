@@ -234,7 +234,7 @@ def simulate_with_effect(system: System, name: str, value: float, mu=None, branc
 
 
 def truth_points(system: System, name: str, value: float) -> dict:
-    """Hopf point and folds of ``system`` with the effect (``None`` where not found)."""
+    """Hopf point and folds (lowest μ first) of ``system`` with the effect (``None``: none)."""
     from bayeshopf.errors import BayesHopfError
     from bayeshopf.simulators.continuation import continue_from_hopf
 
@@ -242,4 +242,5 @@ def truth_points(system: System, name: str, value: float) -> dict:
         d = continue_from_hopf(with_effect(system, name, value))
     except BayesHopfError as exc:
         return {"hopf": None, "fold": None, "note": str(exc)}
-    return {"hopf": float(d.hopf.mu), "fold": [float(f.mu) for f in d.folds] or None}
+    folds = sorted(float(f.mu) for f in d.folds)
+    return {"hopf": float(d.hopf.mu), "fold": folds or None}

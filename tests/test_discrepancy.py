@@ -1,0 +1,203 @@
+"""Missing physics: blind analyses of simulated recordings with hidden effects.
+
+Each effect's recordings are simulated once per module (4 stable + 4 unstable
+LCOs of flutter3dof, 1.5% RMS noise, sensor offsets, 8 s records) and
+analysed blind: :func:`analyse` is told the simulator and nothing else. The
+default run covers three effects (both coordinates, three kinds), a set
+without an effect and one outside the library; the other effects are marked
+slow.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+jax.config.update("jax_enable_x64", True)
+
+from bayeshopf.cli.main import main  # noqa: E402
+from bayeshopf.discrepancy import analyse, simulate_with_effect  # noqa: E402
+from bayeshopf.discrepancy.effects import effect_names, with_effect  # noqa: E402
+from bayeshopf.discrepancy.terms import KINDS, library, term_force  # noqa: E402
+from bayeshopf.simulators import get_system, simulate_recordings  # noqa: E402
+
+PLAN = [(15.75, "stable"), (16.25, "stable"), (16.75, "stable"), (17.25, "stable"),
+        (15.75, "unstable"), (16.25, "unstable"), (16.75, "unstable"), (17.25, "unstable")]
+KW = dict(duration_s=8.0, noise=0.015, offsets={"h": 0.001, "alpha": -0.004})
+
+# alpha_cubic_stiffness (300 N m/rad^3) is the third blind effect of the default run: the
+# CLI test plants it with `bayeshopf simulate --effect` and analyses it with the command.
+FAST = [("h_cubic_damping", 20.0), ("alpha_quadratic_damping", 0.05)]
+SLOW = [("alpha_cubic_stiffness", 300.0), ("h_coulomb_friction", 0.2),
+        ("alpha_quadratic_stiffness", 20.0),
+        ("h_cubic_stiffness", 5e5), ("h_quadratic_damping", 10.0),
+        ("alpha_quintic_stiffness", 5e4)]
+
+
+@pytest.fixture(scope="module")
+def flutter():
+    return get_system("flutter3dof")
+
+
+_CACHE: dict = {}
+
+
+def _blind(flutter, name, value, seed=5):
+    key = (name, value)
+    if key not in _CACHE:
+        mus, brs = [m for m, _ in PLAN], [b for _, b in PLAN]
+        if name == "none":
+            rs = simulate_recordings(flutter, mus, brs, seed=seed, **KW)
+        else:
+            rs, _ = simulate_with_effect(flutter, name, value, mus, brs, seed=seed, **KW)
+        _CACHE[key] = (rs, analyse(rs, flutter, seed=0, hybrid=False, point_intervals=False))
+    return _CACHE[key]
+
+
+def _check_named(rep, name, value):
+    d = rep.to_json()
+    assert d["verdict"]["kind"] == "named", d["verdict"]
+    assert name in d["verdict"]["terms"], d["verdict"]
+    assert d["candidates"][0]["name"] == name
+    co = d["candidates"][0]["coefficient"]
+    assert co["ci90"][0] <= value <= co["ci90"][1], (co, value)
+    fb, fa = d["fit"]["before"], d["fit"]["after"]
+    assert fa["chi2"] < 0.1 * fb["chi2"]
+    for c in ("h", "alpha"):
+        assert fa["rms_orbit_error"][c] < fb["rms_orbit_error"][c]
+    assert fa["elpd_difference"] > 2 * fa["elpd_difference_se"]
+    assert d["mismatch"]["significant"]
+    assert not d["mismatch"]["after"]["significant"]
+
+
+# --------------------------------------------------------------------- unit tests
+
+
+def test_library_names_units_and_prior_scales(flutter):
+    lib = library(flutter, {"h": 0.02, "alpha": 0.06}, 2.4)
+    assert len(lib.terms) == 2 * len(KINDS)                     # h and alpha, not w
+    assert lib["alpha_cubic_stiffness"].units == "N m/rad^3"
+    assert lib["h_coulomb_friction"].units == "N"
+    assert lib["alpha_freeplay"].units == "rad"
+    t = lib["alpha_cubic_stiffness"]                            # 20% of k_alpha·A at A
+    assert abs(t.scale * 0.06**3 - 0.2 * flutter.params["k_alpha"] * 0.06) < 1e-9
+    # freeplay: no force at zero gap, full clip inside the gap
+    assert float(term_force("freeplay", 0.01, 0.0, 0.0, 100.0, 1e-4)) == 0.0
+    assert abs(float(term_force("freeplay", 0.001, 0.0, 0.01, 100.0, 1e-6)) - 0.1) < 1e-3
+    assert "delayed_aero" in effect_names(flutter)
+    with pytest.raises(ValueError, match="expected one of"):
+        with_effect(flutter, "w_cubic_stiffness", 1.0)
+
+
+# ------------------------------------------------------------------ blind analyses
+
+
+@pytest.mark.parametrize(("name", "value"), FAST)
+def test_blind_effect_is_named(flutter, name, value):
+    _, rep = _blind(flutter, name, value)
+    _check_named(rep, name, value)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "value"), SLOW)
+def test_blind_effect_is_named_slow(flutter, name, value):
+    _, rep = _blind(flutter, name, value)
+    _check_named(rep, name, value)
+
+
+def test_no_effect_gives_none(flutter):
+    _, rep = _blind(flutter, "none", 0.0)
+    d = rep.to_json()
+    assert d["verdict"]["kind"] == "none", d["verdict"]
+    assert d["verdict"]["terms"] == []
+    assert not d["mismatch"]["significant"]
+    assert d["candidates"][0]["name"] == "none"
+
+
+def test_out_of_library_effect_is_unexplained(flutter):
+    _, rep = _blind(flutter, "delayed_aero", 1.0)
+    d = rep.to_json()
+    assert d["verdict"]["kind"] == "unexplained", d["verdict"]
+    assert d["mismatch"]["significant"]
+    assert d["mismatch"]["after"]["significant"]
+    assert "no single library term" in d["verdict"]["sentence"]
+    assert any(r["significant"] for r in d["mismatch"]["by_recording"])
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def test_cli_simulate_effect_then_discrepancy(tmp_path, flutter):
+    data, truth, out = tmp_path / "data", tmp_path / "truth.json", tmp_path / "out"
+    args = ["simulate", "flutter3dof", "--out", str(data), "--duration", "8", "--noise",
+            "0.015", "--offset", "h=0.001", "alpha=-0.004", "--effect",
+            "alpha_cubic_stiffness", "--effect-value", "300", "--truth-out", str(truth),
+            "--mu"] + [str(m) for m, _ in PLAN] + ["--branch"] + [b for _, b in PLAN]
+    assert main(args) == 0
+    assert sorted(p.name for p in data.iterdir())[0] == "manifest.csv"
+    assert not (data / "simulation.json").exists()              # no truth beside the data
+    for p in data.iterdir():
+        assert "cubic" not in p.read_text()
+    assert json.loads(truth.read_text())["effect"] == "alpha_cubic_stiffness"
+    before = {p.name: p.read_bytes() for p in data.iterdir()}
+    assert main(["discrepancy", str(data), "--simulator", "flutter3dof", "--out", str(out),
+                 "--no-hybrid", "--quiet"]) == 0
+    assert {p.name: p.read_bytes() for p in data.iterdir()} == before   # inputs untouched
+    d = json.loads((out / "report.json").read_text())
+    assert set(d) >= {"verdict", "candidates", "mismatch", "fit"}
+    assert set(d["verdict"]) >= {"kind", "terms", "sentence"}
+    assert d["verdict"]["terms"] == ["alpha_cubic_stiffness"]
+    c = d["candidates"][0]
+    lo, hi = c["coefficient"]["ci90"]
+    assert lo <= 300.0 <= hi
+    fb, fa = d["fit"]["before"], d["fit"]["after"]
+    assert fa["chi2"] < 0.1 * fb["chi2"]
+    assert fa["fold_ci90"][0] <= fa["fold"] <= fa["fold_ci90"][1]
+    true_fold = json.loads(truth.read_text())["fold"][0]
+    assert abs(fa["fold"] - true_fold) < abs(fb["fold"] - true_fold) / 5
+    assert set(c) >= {"name", "probability", "coefficient"}
+    assert set(c["coefficient"]) >= {"median", "ci90", "units"}
+    probs = [x["probability"] for x in d["candidates"]]
+    assert probs == sorted(probs, reverse=True)
+    r = d["mismatch"]["by_recording"][0]
+    assert set(r) >= {"file", "mu", "branch", "amplitude_error", "frequency_error", "channel",
+                      "phase_range"}
+    assert set(d["fit"]) == {"before", "after"}
+    assert (out / "report.md").read_text().startswith("# Discrepancy analysis")
+    assert (out / "figures" / "bifurcation_diagram.png").stat().st_size > 10_000
+    assert (out / "figures" / "orbit_residuals.png").stat().st_size > 10_000
+    # a second run into the same folder is refused
+    assert main(["discrepancy", str(data), "--simulator", "flutter3dof", "--out", str(out),
+                 "--no-hybrid", "--quiet"]) == 2
+
+
+@pytest.mark.parametrize("bad", ["simulator", "folder", "effect"])
+def test_cli_bad_input_is_one_line_exit_2(tmp_path, capsys, bad):
+    if bad == "effect":
+        args = ["simulate", "flutter3dof", "--out", str(tmp_path / "x"), "--effect",
+                "w_freeplay", "--effect-value", "1"]
+    elif bad == "simulator":
+        (tmp_path / "d").mkdir()
+        args = ["discrepancy", str(tmp_path / "d"), "--simulator", "nosuch", "--out",
+                str(tmp_path / "o")]
+    else:
+        args = ["discrepancy", str(tmp_path / "missing"), "--simulator", "flutter3dof",
+                "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "error:" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_report_markdown_and_figures_of_a_blind_run(flutter, tmp_path):
+    from bayeshopf.plotting.discrepancy import plot_discrepancy
+
+    _, rep = _blind(flutter, "h_cubic_damping", 20.0)
+    md = rep.to_markdown()
+    assert "h_cubic_damping" in md and "| fold |" in md
+    paths = plot_discrepancy(rep, tmp_path)
+    assert all(p.stat().st_size > 10_000 for p in paths)
+    assert np.isfinite(rep.to_json()["fit"]["after"]["fold"])
