@@ -201,3 +201,48 @@ def test_report_markdown_and_figures_of_a_blind_run(flutter, tmp_path):
     paths = plot_discrepancy(rep, tmp_path)
     assert all(p.stat().st_size > 10_000 for p in paths)
     assert np.isfinite(rep.to_json()["fit"]["after"]["fold"])
+
+
+# ------------------------------------------------------------- example and notebook
+
+REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+def _fast_env() -> dict:
+    import os
+
+    return {**os.environ, "BAYESHOPF_FAST": "1", "MPLBACKEND": "Agg"}
+
+
+@pytest.mark.slow
+def test_example_script_runs_in_fast_mode(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(REPO / "examples" / "missing_physics.py"),
+                           str(tmp_path / "mp")], cwd=tmp_path, env=_fast_env(),
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "The simulator lacks cubic stiffness in pitch" in proc.stdout
+    assert (tmp_path / "mp" / "blind" / "report.json").is_file()
+
+
+@pytest.mark.notebooks
+def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
+    import shutil
+
+    nbclient = pytest.importorskip("nbclient")
+    import nbformat
+
+    src = REPO / "notebooks" / "04_missing_physics.ipynb"
+    copy = tmp_path / src.name                       # never execute the stored notebook
+    shutil.copyfile(src, copy)
+    for k, v in _fast_env().items():
+        monkeypatch.setenv(k, v)
+    nb = nbformat.read(copy, as_version=4)
+    nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
+                            resources={"metadata": {"path": str(REPO / "notebooks")}}).execute()
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
+                   for o in c.get("outputs", []))
+    assert "The simulator lacks quadratic damping in pitch" in text
+    assert "no effect: The simulator matches the recordings within their noise" in text

@@ -114,6 +114,10 @@ def plot_orbit_residuals(report):
             if best.orbits.ok[r]:
                 ax.plot(th, zm - off1[c] - curve(lay, ys1[r], c), color="C2", lw=1.2,
                         label=f"+ {term}")
+            if not base.ok[r] and not best.orbits.ok[r]:
+                ax.text(0.5, 0.5, "no LCO of the simulator here", transform=ax.transAxes,
+                        ha="center", va="center", fontsize=LEGEND_SIZE)
+                ax.set_yticks([])
             ax.axhline(0, color="0.6", lw=0.5)
             style_axes(ax, grid=False)
             if r == 0:
