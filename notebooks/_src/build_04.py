@@ -26,7 +26,7 @@ bifurcation diagram does not match. `bayeshopf.discrepancy.analyse`
 
 Here it is proven blind: the recordings are simulated with a hidden effect that the analysis is not
 told. Set `BAYESHOPF_FAST=1` before starting the kernel for a quick run (shorter records, no hybrid
-fit, no wind-tunnel data)."""),
+fit, no intervals of the Hopf point and fold with the term, no wind-tunnel data)."""),
     new_code_cell("""%matplotlib inline
 import os
 
@@ -63,7 +63,7 @@ print(len(rs), "recordings:", ", ".join(r.name for r in rs))"""),
 
 Only the recordings and the simulator go in. With `hybrid=True` the Bayesian hybrid fit of the
 recordings is run too, for its Hopf and fold intervals (minutes)."""),
-    new_code_cell("""report = analyse(rs, flutter, seed=0, hybrid=not FAST)
+    new_code_cell("""report = analyse(rs, flutter, seed=0, hybrid=not FAST, point_intervals=not FAST)
 d = report.to_json()
 print(d["verdict"]["sentence"])
 display(Markdown(report.to_markdown()))"""),
