@@ -217,6 +217,27 @@ def _force_unit(qu: str) -> str:
     return "N m" if qu == "rad" else ("N" if qu == "m" else "force")
 
 
+def _linear_stiffness(system: System, coord: str) -> float:
+    r"""Linear restoring stiffness of ``coord`` in force units, from the Jacobian at ``x = 0``.
+
+    :math:`k = -J_{vq} / B_{vq}`: the acceleration per unit displacement over the
+    acceleration per unit force, at the middle of ``system.mu_range``. Used for
+    the prior scales when the system has no ``k_<coordinate>`` parameter.
+    """
+    import jax
+
+    pos = system.state_names.index(coord)
+    vel = (system.state_names.index(f"{coord}_dot") if f"{coord}_dot" in system.state_names
+           else pos + 1)
+    mu = 0.5 * sum(system.mu_range)
+    x = jnp.zeros(system.n_states)
+    p = system.param_tree()
+    J = np.asarray(jax.jacfwd(system.rhs)(x, jnp.asarray(mu), p))
+    B = np.asarray(system.force_input(x, jnp.asarray(mu), p))
+    b = B[vel, system.coordinates.index(coord)]
+    return float(-J[vel, pos] / b) if b != 0 else float("nan")
+
+
 def library(system: System, amplitude: Mapping[str, float], frequency_hz: float, *,
             kinds: tuple[str, ...] = KINDS) -> Library:
     r"""The candidate terms for ``system``'s observed mechanical coordinates.
@@ -248,23 +269,25 @@ def library(system: System, amplitude: Mapping[str, float], frequency_hz: float,
         V = 2 * np.pi * float(frequency_hz) * A
         A_out[c], V_out[c] = A, V
         k = system.params.get(f"k_{c}")
+        k_eff = float(k) if k is not None else _linear_stiffness(system, c)
         for kind in kinds:
             name = f"{c}_{kind}"
-            if k is None:
-                if kind == "freeplay":
-                    skipped[name] = f"no linear stiffness parameter k_{c} in {system.name}"
-                    continue
-                kk = None
-            else:
-                kk = float(k)
-            if kk is None:  # scale from the force of a unit-less guess: keep it well defined
-                skipped[name] = f"no linear stiffness parameter k_{c} for the prior scale"
+            if kind == "freeplay" and k is None:
+                skipped[name] = (f"no linear structural stiffness parameter k_{c} in "
+                                 f"{system.name} (the spring a dead band would act on)")
+                continue
+            kk = float(k) if kind == "freeplay" else k_eff
+            if not (np.isfinite(kk) and kk > 0):
+                skipped[name] = f"no positive linear stiffness of {c} for the prior scale"
                 continue
             eps = SMOOTHING * (A if kind == "freeplay" else V)
             terms.append(Term(name=name, coordinate=c, kind=kind, units=_units(kind, qu, fu),
                               scale=_scale(kind, kk, A, V),
                               stiffness=kk if kind == "freeplay" else 0.0, eps=eps,
                               index=system.coordinates.index(c)))
+    if not terms:
+        raise TermError(f"{system.name}: candidate terms expected; found none ("
+                        + "; ".join(sorted(set(skipped.values()))) + ")")
     return Library(tuple(terms), skipped, A_out, V_out)
 
 
