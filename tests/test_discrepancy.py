@@ -246,3 +246,17 @@ def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
                    for o in c.get("outputs", []))
     assert "The simulator lacks quadratic damping in pitch" in text
     assert "no effect: The simulator matches the recordings within their noise" in text
+
+
+@pytest.mark.slow
+def test_other_system_without_stiffness_parameters():
+    """Van der Pol (no k_z1): prior scales from the Jacobian, no freeplay term, named blind."""
+    vdp = get_system("vanderpol")
+    rs, _ = simulate_with_effect(vdp, "z1_cubic_stiffness", 0.05, [0.2, 0.4, 0.6, 0.8],
+                                 "stable", duration_s=60, noise=0.015, seed=1,
+                                 sample_rate_hz=50)
+    d = analyse(rs, vdp, hybrid=False).to_json()
+    assert d["verdict"]["terms"] == ["z1_cubic_stiffness"]
+    assert "z1_freeplay" in d["library"]["skipped"]
+    lo, hi = d["candidates"][0]["coefficient"]["ci90"]
+    assert lo <= 0.05 <= hi
