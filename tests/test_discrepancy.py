@@ -26,6 +26,10 @@ from bayeshopf.simulators import get_system, simulate_recordings  # noqa: E402
 
 PLAN = [(15.75, "stable"), (16.25, "stable"), (16.75, "stable"), (17.25, "stable"),
         (15.75, "unstable"), (16.25, "unstable"), (16.75, "unstable"), (17.25, "unstable")]
+# freeplay removes the linear stiffness at the equilibrium and moves the Hopf point: the
+# unstable LCOs near it vanish, so its sets record the unstable branch nearer the fold
+PLAN_FREEPLAY = PLAN[:4] + [(15.25, "unstable"), (15.5, "unstable"), (15.75, "unstable"),
+                            (16.0, "unstable")]
 KW = dict(duration_s=8.0, noise=0.015, offsets={"h": 0.001, "alpha": -0.004})
 
 # alpha_cubic_stiffness (300 N m/rad^3) is the third blind effect of the default run: the
@@ -34,7 +38,7 @@ FAST = [("h_cubic_damping", 20.0), ("alpha_quadratic_damping", 0.05)]
 SLOW = [("alpha_cubic_stiffness", 300.0), ("h_coulomb_friction", 0.2),
         ("alpha_quadratic_stiffness", 20.0),
         ("h_cubic_stiffness", 5e5), ("h_quadratic_damping", 10.0),
-        ("alpha_quintic_stiffness", 5e4)]
+        ("alpha_quintic_stiffness", 5e4), ("h_freeplay", 2e-4), ("alpha_freeplay", 5e-4)]
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +52,8 @@ _CACHE: dict = {}
 def _blind(flutter, name, value, seed=5):
     key = (name, value)
     if key not in _CACHE:
-        mus, brs = [m for m, _ in PLAN], [b for _, b in PLAN]
+        plan = PLAN_FREEPLAY if name.endswith("freeplay") else PLAN
+        mus, brs = [m for m, _ in plan], [b for _, b in plan]
         if name == "none":
             rs = simulate_recordings(flutter, mus, brs, seed=seed, **KW)
         else:
