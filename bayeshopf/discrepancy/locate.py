@@ -10,7 +10,9 @@ the difference of the measured and simulated phase-fixed Fourier series
 
 with :math:`\theta = 0` at the maximum of the first harmonic of the reference
 channel. Reported: the amplitude error (simulated over measured half
-peak-to-peak, minus 1), the frequency error, the :math:`\chi^2` per harmonic
+peak-to-peak, minus 1), the frequency error, the phase of each channel's
+fundamental relative to the reference channel's (measured, simulated, error:
+a linear mode-shape mismatch shows here), the :math:`\chi^2` per harmonic
 (which harmonics carry the mismatch), the arc of phase where
 :math:`|\Delta_c|` exceeds half its maximum (around its maximum), the
 displacement and velocity of the channel there relative to their amplitudes
@@ -115,7 +117,17 @@ def locate(layout: FeatureLayout, y_meas: np.ndarray, y_sim: np.ndarray, e: np.n
             for k in range(0, layout.K + 1):
                 jj = [j for j in idx if layout.harmonic[j] == k and layout.kind[j] != "f"]
                 harm[str(k)] = float(np.sum(e[r, jj] ** 2))
+            lab = f"{c}:Im1"
+            if lab in layout.labels:  # phase of the fundamental relative to the reference
+                jr, ji = layout.labels.index(f"{c}:Re1"), layout.labels.index(lab)
+                pm = np.degrees(np.angle(y_meas[r, jr] + 1j * y_meas[r, ji]))
+                ps = np.degrees(np.angle(y_sim[r, jr] + 1j * y_sim[r, ji]))
+                phase = {"measured": float(pm), "simulated": float(ps),
+                         "error": float((ps - pm + 180.0) % 360.0 - 180.0)}
+            else:
+                phase = None
             chans[c] = {"amplitude_error": float(amp_s / amp_m - 1.0), "chi2": chi2,
+                        "phase_to_reference_deg": phase,
                         "n_features": len(idx), "significant": sig,
                         "phase_range": [arc[0], arc[1]], "where": ", ".join(words),
                         "rms_error": float(np.sqrt(np.mean(d**2)) / (np.std(zm) or 1.0)),
