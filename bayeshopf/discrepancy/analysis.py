@@ -403,15 +403,19 @@ def _markdown(d: dict) -> str:
                              f"{h[k]['ci90'][1]:.3f})")
     lines += ["", "## Where the simulator disagrees (before)", "",
               "| recording | μ | branch | worst channel | amplitude error | frequency error | "
-              "phase range (°) | where | significant |", "|---|---:|---|---|---:|---:|---|---|---|"]
+              "phase range (°) | where | phase to reference: simulated − measured (°) | "
+              "significant |", "|---|---:|---|---|---:|---:|---|---|---|---|"]
     for r in d["mismatch"]["by_recording"]:
         if r["channel"] is None:
             lines.append(f"| {r['file']} | {r['mu']:g} | {r['branch']} | – | – | – | – | "
-                         f"{r['where']} | yes |")
+                         f"{r['where']} | – | yes |")
             continue
         lines.append(f"| {r['file']} | {r['mu']:g} | {r['branch']} | {r['channel']} | "
                      f"{100 * r['amplitude_error']:.2f}% | {100 * r['frequency_error']:.3f}% | "
                      f"{r['phase_range'][0]:.0f}–{r['phase_range'][1]:.0f} | {r['where']} | "
+                     + ", ".join(f"{c} {v['phase_to_reference_deg']['error']:+.1f}"
+                                 for c, v in r["channels"].items()
+                                 if v.get("phase_to_reference_deg")) + " | "
                      f"{'yes' if r['significant'] else 'no'} |")
     if d["notes"]:
         lines += ["", "## Notes", ""] + [f"* {n}" for n in d["notes"]]
