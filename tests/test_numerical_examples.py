@@ -1,0 +1,172 @@
+"""The paper's Section 4 reproduced blind: Van der Pol and the 3-DOF aerofoil.
+
+One default-settings fit of each simulated experiment
+(:mod:`bayeshopf.simulators.truth`), started from data-driven values, never
+from the truth. The 3-DOF fit's 90% intervals must hold the simulator's Hopf
+point, fold and a2 = 2√(μ0 − μ_SN), and the held-out orbits must lie in the 90%
+predictive bands; the Van der Pol fit's μ0 interval must hold 0.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayeshopf.features.frame import PlanarFrame
+from bayeshopf.features.orbits import extract_features
+from bayeshopf.pipeline import FitSettings, fit
+from bayeshopf.simulators.truth import (
+    amplitude_truth,
+    flutter_experiment,
+    held_out_check,
+    vanderpol_experiment,
+)
+
+#: The simulator's values (continuation), to 4 decimals.
+FLUTTER_MU0, FLUTTER_FOLD = 18.2747, 14.9362
+
+
+@pytest.fixture(scope="module")
+def flutter():
+    rs, truth = flutter_experiment(seed=0)
+    return rs, truth, fit(rs, "subcritical", seed=0, settings=FitSettings(), progress=False)
+
+
+@pytest.fixture(scope="module")
+def vanderpol():
+    rs, truth = vanderpol_experiment(seed=0)
+    return rs, truth, fit(rs, "supercritical", seed=0, settings=FitSettings(), progress=False)
+
+
+def test_flutter_truth_is_the_papers():
+    _, truth = flutter_experiment(seed=0, fast=True)
+    assert truth.mu0 == pytest.approx(FLUTTER_MU0, abs=1e-3)
+    assert truth.mu_fold == pytest.approx(FLUTTER_FOLD, abs=1e-3)
+    assert truth.a2 == pytest.approx(3.654, abs=2e-3)  # the paper's 3.65
+    assert truth.criticality == "subcritical"
+    # offsets are drawn from the seed, small next to the orbits
+    assert abs(truth.offsets["h"]) < 5e-3 and abs(truth.offsets["alpha"]) < 0.025
+
+
+def test_amplitude_truth_matches_newton_corrected_orbits():
+    _, truth = flutter_experiment(seed=0, fast=True)
+    amp = amplitude_truth(truth.diagram)
+    for mu, branch in truth.held_out + truth.plan:
+        exact = truth.exact_amplitude(mu, branch)
+        assert float(amp(mu, branch)) == pytest.approx(exact, rel=1e-4), (mu, branch)
+    # square-root ends: zero at the Hopf point, nan past the ends of a branch
+    assert float(amp(truth.mu0, "unstable")) == pytest.approx(0.0, abs=1e-9)
+    assert np.isnan(amp(truth.mu_fold - 0.01, "stable"))
+    assert np.isnan(amp(truth.mu0 + 0.01, "unstable"))
+    assert np.all(np.isfinite(amp(np.array([15.0, 19.0]), "stable")))
+
+
+def test_small_orbits_far_from_the_mean_centre_get_the_deepest_centre():
+    """The 18 m/s unstable orbit does not encircle the mean of the orbit means."""
+    rs, _ = flutter_experiment(seed=0, fast=True)
+    orbits = [r.planar(rs.planar) for r in rs]
+    mean = PlanarFrame.from_orbits(orbits).centre
+    feats = extract_features(rs)  # would raise if some orbit missed the centre
+    assert not np.allclose(feats.frame.centre, mean)
+    deepest = PlanarFrame.from_orbits(orbits, centre="deepest").centre
+    np.testing.assert_allclose(feats.frame.centre, deepest)
+
+
+def test_flutter_blind_fit_intervals_hold_the_truth(flutter):
+    _, truth, result = flutter
+    for name, true in truth.values().items():
+        iv = result.interval(name)
+        assert iv.lo <= true <= iv.hi, (name, iv, true)
+        # informative, not merely right: narrower than a tenth of the bistable range
+        assert iv.hi - iv.lo < 0.1 * (truth.mu0 - truth.mu_fold) * (1 if name != "a2" else 1), (
+            name, iv)
+
+
+def test_flutter_held_out_orbits_inside_predictive_bands(flutter):
+    _, truth, result = flutter
+    rows = held_out_check(result, truth)
+    assert len(rows) == len(truth.held_out) >= 6
+    for r in rows:
+        assert r["p_exists"] > 0.9, r
+        assert r["inside"], r
+
+
+def test_vanderpol_blind_fit_mu0_interval_holds_zero(vanderpol):
+    _, truth, result = vanderpol
+    assert result.criticality == "supercritical"
+    iv = result.interval("mu0")
+    assert iv.lo <= truth.mu0 <= iv.hi, iv
+    assert iv.hi - iv.lo < 0.1, iv
+
+
+# ---------------------------------------------------------------- demo, example, notebook 02
+
+REPO = Path(__file__).resolve().parent.parent
+NOTEBOOK = REPO / "notebooks" / "02_numerical_examples.ipynb"
+EXAMPLE = REPO / "examples" / "numerical_examples.py"
+
+
+def test_demo_fits_the_simulated_aerofoil(tmp_path, capsys):
+    """``bayeshopf demo --fast``: the 3-DOF recordings, fitted, with the simulator's truth."""
+    from bayeshopf.cli.main import main
+
+    out = tmp_path / "demo"
+    assert main(["demo", "--fast", "--quiet", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "3-DOF aeroelastic aerofoil" in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["truth"]["mu0"] == pytest.approx(FLUTTER_MU0, abs=1e-3)
+    assert summary["truth"]["mu_fold"] == pytest.approx(FLUTTER_FOLD, abs=1e-3)
+    # even the fast fit lands within a few tenths of a m/s of the Hopf point and the fold
+    for q, true in (("mu0", FLUTTER_MU0), ("mu_fold", FLUTTER_FOLD)):
+        assert abs(summary[q]["median"] - true) < 0.3, summary[q]
+    assert (out / "figures").is_dir() and any((out / "figures").glob("*.png"))
+
+
+@pytest.mark.notebooks
+def test_numerical_examples_script_runs_in_fast_mode(tmp_path):
+    env = {**os.environ, "BAYESHOPF_FAST": "1", "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, str(EXAMPLE), str(tmp_path), "--system", "vanderpol"],
+                          env=env, capture_output=True, text=True, timeout=1800)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "held-out:" in proc.stdout and "mu0" in proc.stdout
+    assert len(list(tmp_path.glob("vanderpol_*.png"))) == 3
+
+
+@pytest.mark.notebooks
+def test_numerical_examples_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    (tmp_path / "notebooks").mkdir()
+    copy = tmp_path / "notebooks" / NOTEBOOK.name  # never execute (or overwrite) the stored one
+    copy.write_bytes(NOTEBOOK.read_bytes())
+    nb = nbformat.read(copy, as_version=4)
+    monkeypatch.setenv("BAYESHOPF_FAST", "1")
+    monkeypatch.delenv("MPLBACKEND", raising=False)
+    nbclient.NotebookClient(nb, timeout=1800, kernel_name="python3",
+                            resources={"metadata": {"path": str(copy.parent)}}).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: True" in text
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 6
+
+
+@pytest.mark.notebooks
+def test_stored_numerical_examples_notebook_has_outputs_of_a_full_run():
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
+    outputs = [o for c in code for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: False" in text
+    assert "20 seeds" in text, "the calibration summary of 20 seeds must be stored"
