@@ -39,6 +39,7 @@ def fit_svi(
     n_draws: int = 1000,
     progress: bool = True,
     obs_name: str = "coeffs",
+    curvature_init: bool = True,
 ) -> SviResult:
     r"""Variational posterior started at the MAP point.
 
@@ -76,6 +77,8 @@ def fit_svi(
             for the low-rank guide).
         n_draws: Posterior draws to return.
         progress: Show a progress bar.
+        curvature_init: Start the full-rank guide at the curvature scales (above);
+            ``False`` starts every coordinate at ``init_scale``.
         obs_name: Keyword argument of the model holding the observations; it is
             set to ``None`` for the posterior predictive draws, which are
             returned as ``<obs_name>_rep``.
@@ -90,7 +93,7 @@ def fit_svi(
     svi = SVI(model, g, optax.adam(learning_rate), Trace_ELBO(num_particles=num_particles))
     k_run, k_draw = jax.random.split(key)
     init_params = None
-    if guide == "mvn":
+    if guide == "mvn" and curvature_init:
         loc, scales = _curvature_scales(model, model_kwargs, map_result, init_scale)
         init_params = {"auto_loc": loc, "auto_scale_tril": jnp.diag(scales)}
     res = svi.run(k_run, steps, progress_bar=progress, stable_update=True,
