@@ -3,8 +3,7 @@
 The closed-form LCO radius explains how the orbit size grows with μ; fitting
 ``a0_i ≈ κ r(μ_i)`` (a0: the mean of the measured R(θ) in the frame) over the
 gaps to μ0 and the fold gives starting values for μ0, a2 and the scale of T_L.
-The orbit centres, regressed on μ̃ and on ``s = r²/r̄²`` at the starting
-radius, give T_s, the μ column of T_L and the centre shift q (the start of Q).
+The orbit centres, regressed on μ̃, give T_s and the μ column of T_L.
 """
 
 from __future__ import annotations
@@ -108,28 +107,16 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
     # fold, where the radius has an infinite μ-derivative and the gradient is nan
     x[:2] = np.maximum(x[:2], np.log(0.02 * span))
     kappa = float(np.exp(x[2]))
-    # orbit centres in the frame, regressed on μ̃ and s = r²/r̄²: T_s + T_L_mu μ̃ + q s
-    # (the centre of a large flutter orbit moves with its size, not with μ alone;
-    # started at q = 0 the optimiser settles with the orbits displaced instead)
+    # orbit centres in the frame, regressed on μ̃: T_s + T_L_mu μ̃
     centres = fourier.curve(features.coeffs, 256).mean(axis=1)
-    columns = [np.ones_like(features.mu), spec.mu_tilde(features.mu)]
-    if spec.criticality == "subcritical":
-        # two branches tell r² from μ; on a single (supercritical) branch r² is
-        # nearly linear in μ, q is not identified by the centres and starts at 0
-        r_start = np.asarray(normal_form.lco_radius(
-            features.mu, *_normal_form_from_gaps(spec, x), sign))
-        columns.append(r_start**2 / spec.r2_scale)
-    beta, *_ = np.linalg.lstsq(np.stack(columns, axis=1), centres, rcond=None)
+    X = np.stack([np.ones_like(features.mu), spec.mu_tilde(features.mu)], axis=1)
+    beta, *_ = np.linalg.lstsq(X, centres, rcond=None)
     rho = spec.orbit_scale
     v = {
         "T_L_diag": np.array([kappa, kappa]),
         "T_L_21": 0.0,
         "T_L_mu": beta[1],
         "T_L1": np.zeros(3),
-        "T_L2": np.zeros(3),
-        # Q with the circle average (Q·1 + Q·3) s/2 = q s of the fitted centre shift q
-        "T_Q": (np.stack([beta[2], np.zeros(2), beta[2]], axis=1).ravel()
-                if beta.shape[0] > 2 else np.zeros(6)),
         "T_s": beta[0],
         "nn_scale": 0.01 * rho,
         # the closed-form fit's RMS error in a0, as a first guess of every σ_k

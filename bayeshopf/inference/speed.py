@@ -77,8 +77,7 @@ from bayeshopf.model.probabilistic import typical_radius
 #: Prior standard deviation (rad) of each initial phase about its root-find value.
 THETA0_SD = 0.2
 
-MAP_KEYS = ("mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_s", "nn_scale",
-            *hybrid.OPTIONAL_MAP_SITES)
+MAP_KEYS = ("mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_s", "nn_scale")
 
 
 def _map_keys(spec: ModelSpec) -> list[str]:
@@ -590,7 +589,7 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     timings = {}
     t0 = time.perf_counter()
     mspec = hopf_fit.spec
-    keys = [k for k in _map_keys(mspec) if k in hopf_fit.map.params]  # older fits lack some
+    keys = _map_keys(mspec)
     map_point = {k: np.asarray(hopf_fit.map.params[k]) for k in keys}
     data = prepare_speed_data(recordings, mspec, {k: jnp.asarray(v) for k, v in map_point.items()},
                               settings)

@@ -76,11 +76,6 @@ class ModelSpec:
         """``μ̃ = (μ − μ_c)/Δμ``."""
         return (mu - self.mu_centre) / self.mu_span
 
-    @property
-    def r2_scale(self) -> float:
-        """``r̄² = √(4Δμ)``, the squared normal-form radius scale of the priors."""
-        return float(np.sqrt(4.0 * self.mu_span))
-
     def to_dict(self) -> dict:
         """JSON-serialisable form (saved beside a fit)."""
         d = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in ("frame", "extra")}
@@ -106,9 +101,6 @@ class HopfParams(NamedTuple):
         T_s: Shift of the map, shape ``(2,)``.
         nn: Weights of the map's MLP correction.
         nn_scale: Output scale of the MLP.
-        T_L2: ``r²``-slope of T_L's 2×2 block (lower-triangular), shape ``(2, 2)``,
-            or ``None`` (a fit saved without it).
-        T_Q: Quadratic term ``Q`` of the map, shape ``(2, 3)``, or ``None``.
     """
 
     mu0: jax.Array
@@ -118,13 +110,6 @@ class HopfParams(NamedTuple):
     T_s: jax.Array
     nn: MLPParams
     nn_scale: jax.Array
-    T_L2: jax.Array | None = None
-    T_Q: jax.Array | None = None
-
-
-#: Sites of the map added after the first saved fits: absent from those, and
-#: then left out of the map (:func:`params_from_sites`).
-OPTIONAL_MAP_SITES = ("T_L2", "T_Q")
 
 
 def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
@@ -141,8 +126,6 @@ def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
         T_s=sites["T_s"],
         nn=nn,
         nn_scale=sites["nn_scale"],
-        T_L2=lower_triangular(sites["T_L2"][:2], sites["T_L2"][2]) if "T_L2" in sites else None,
-        T_Q=jnp.reshape(sites["T_Q"], (2, 3)) if "T_Q" in sites else None,
     )
 
 
@@ -155,8 +138,7 @@ def orbit_at(params: HopfParams, mu, sign, phi, spec: ModelSpec):
     r = normal_form.lco_radius(mu, params.mu0, params.a2, sign)
     u = r * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
     return U12(
-        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale,
-        T_L2=params.T_L2, T_Q=params.T_Q, r2_scale=spec.r2_scale,
+        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale
     )
 
 

@@ -15,9 +15,7 @@ unit circle; Δμ the spread of the training μ; ``ρ`` the median measured a0):
 * map (eq. g): ``diag(T_L) ~ LogNormal(log(ρ/r̄), 1)`` with ``r̄ = (4Δμ)^{1/4}``
   the typical normal-form radius; ``l21 ~ N(0, ρ/r̄)``; ``l13, l23 ~ N(0, ρ)``;
   ``T_s ~ N(0, ρ)``; the μ̃-slope of the 2×2 block,
-  ``L1 = [[p1, 0], [p3, p2]]`` with ``p ~ N(0, ρ/r̄)`` (no change with μ a priori);
-  the ``r²``-slope ``L2`` likewise, and the quadratic ``Q ~ N(0, ρ)`` (per unit
-  ``u_i u_j/r̄²``) (:mod:`bayeshopf.model.coordinate_map`).
+  ``L1 = [[p1, 0], [p3, p2]]`` with ``p ~ N(0, ρ/r̄)`` (no change with μ a priori).
 * NN: unit-normal weights (scaled by 1/√fan_in), output scale
   ``~ HalfNormal(0.1 ρ)``: a priori the correction is a tenth of the orbit size,
   and the data must ask for more. This is what keeps the diagram from wiggling
@@ -111,11 +109,9 @@ def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
     T_L_21 = numpyro.sample("T_L_21", dist.Normal(0.0, t_scale))
     T_L_mu = numpyro.sample("T_L_mu", dist.Normal(0.0, rho).expand([2]).to_event(1))
     T_L1 = numpyro.sample("T_L1", dist.Normal(0.0, t_scale).expand([3]).to_event(1))
-    T_L2 = numpyro.sample("T_L2", dist.Normal(0.0, t_scale).expand([3]).to_event(1))
-    T_Q = numpyro.sample("T_Q", dist.Normal(0.0, rho).expand([6]).to_event(1))
     T_s = numpyro.sample("T_s", dist.Normal(0.0, rho).expand([2]).to_event(1))
     sites = {"mu0": mu0, "a2": a2, "T_L_diag": T_L_diag, "T_L_21": T_L_21,
-             "T_L_mu": T_L_mu, "T_L1": T_L1, "T_L2": T_L2, "T_Q": T_Q, "T_s": T_s}
+             "T_L_mu": T_L_mu, "T_L1": T_L1, "T_s": T_s}
     sites["nn_scale"] = numpyro.sample("nn_scale", dist.HalfNormal(0.1 * rho))
     for i, (n_in, n_out) in enumerate(spec.nn_shapes):
         sites[f"nn_W{i}"] = numpyro.sample(
