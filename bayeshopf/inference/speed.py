@@ -74,6 +74,9 @@ from bayeshopf.model import speed as sp
 from bayeshopf.model.hybrid import ModelSpec, branch_signs
 from bayeshopf.model.probabilistic import typical_radius
 
+#: Initial standard deviation of the speed SVI guide (unconstrained space).
+SPEED_INIT_SCALE = 1e-2
+
 #: Prior standard deviation (rad) of each initial phase about its root-find value.
 THETA0_SD = 0.2
 
@@ -625,11 +628,11 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     t0 = time.perf_counter()
     n_map = int(np.asarray(hopf_fit.samples["mu0"]).shape[0])
     n_draws = min(settings.n_draws, n_map)
-    # flat start at 1e-2: started at the curvature scales, the frequency bands of the
-    # planted set stayed too narrow (the truth outside them at 8 of 10 μ)
+    # the speed guide starts at 1e-2: started at 1e-4 (the map's start), the
+    # frequency bands of the planted set stayed too narrow (truth outside at 8 of 10 μ)
     svi_result = fit_svi(speed_model, kwargs, map_result, key=k_svi, steps=settings.svi_steps,
                          num_particles=settings.num_particles, n_draws=n_draws,
-                         progress=progress, obs_name="y", curvature_init=False)
+                         progress=progress, obs_name="y", init_scale=SPEED_INIT_SCALE)
     timings["svi"] = time.perf_counter() - t0
     samples = {k: v for k, v in svi_result.samples.items() if k != "y_rep"}
     map_samples = {k: np.asarray(hopf_fit.samples[k])[:n_draws] for k in keys}
