@@ -14,6 +14,8 @@ import shutil
 import uuid
 from pathlib import Path
 
+from bayeshopf._atomic import swap_in
+
 
 def add_parser(sub) -> argparse.ArgumentParser:
     """Add the ``discrepancy`` subcommand to the subparsers ``sub``."""
@@ -79,17 +81,7 @@ def write_report(report, out: str | os.PathLike[str], *, force: bool = False,
             from bayeshopf.plotting.discrepancy import plot_discrepancy
 
             plot_discrepancy(report, tmp / "figures")
-        if out.exists():
-            old = out.parent / f".{out.name}.old-{tag}"
-            os.rename(out, old)
-            try:
-                os.rename(tmp, out)
-            except OSError:
-                os.rename(old, out)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, out)
+        swap_in(tmp, out, tag)
     except OSError as exc:
         raise OutputError(f"{out}: cannot be written ({type(exc).__name__}: {exc})") from exc
     finally:

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
+from bayeshopf._atomic import swap_in
 from bayeshopf.data.recording import Recording, RecordingSet
 from bayeshopf.errors import DataError, OutputError
 
@@ -367,17 +368,7 @@ def write_interchange(
         folder.parent.mkdir(parents=True, exist_ok=True)
         os.mkdir(tmp)
         _write_folder(rs, tmp)
-        if folder.exists():
-            old = folder.parent / f".{folder.name}.old-{tag}"
-            os.rename(folder, old)
-            try:
-                os.rename(tmp, folder)
-            except OSError:
-                os.rename(old, folder)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, folder)
+        swap_in(tmp, folder, tag)
     except OSError as exc:
         raise OutputError(f"{folder}: cannot be written ({_one_line(exc)})") from exc
     finally:

@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bayeshopf._atomic import swap_in
 from bayeshopf.data.io import write_interchange
 from bayeshopf.data.recording import Recording, RecordingSet
 from bayeshopf.errors import OutputError
@@ -302,17 +303,7 @@ def write_simulation(rs: RecordingSet, folder: str | os.PathLike[str], *,
         if info is not None:
             (tmp / SIMULATION_INFO).write_text(json.dumps(info, indent=2) + "\n",
                                                encoding="utf-8")
-        if folder.exists():
-            old = folder.parent / f".{folder.name}.old-{tag}"
-            os.rename(folder, old)
-            try:
-                os.rename(tmp, folder)
-            except OSError:
-                os.rename(old, folder)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.rename(tmp, folder)
+        swap_in(tmp, folder, tag)
     except OutputError:
         raise
     except OSError as exc:
