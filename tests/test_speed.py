@@ -73,6 +73,55 @@ def test_initial_phase_recovers_planted(mu, sign, theta0):
         assert abs(np.angle(np.exp(1j * (got - theta0)))) < 1e-9, (got, theta0, scale)
 
 
+def test_mean_frequency_likelihood_is_the_documented_normal():
+    """Site ``f``: log N(f_i; f̂_i, √(s_i² + (τ f̂_i)²)) with f̂_i = 1/∮dθ/Ω (scipy reference)."""
+    from numpyro import handlers
+    from scipy.stats import norm
+
+    from bayeshopf.inference.speed import speed_model
+    from bayeshopf.model.hybrid import params_from_sites
+
+    mspec, mp = _map()
+    spec, p = _speed()
+    map_sites = {"mu0": mp.mu0, "a2": mp.a2, "T_L_diag": jnp.array([0.8, 0.5]),
+                 "T_L_21": jnp.asarray(0.3), "T_L_mu": jnp.array([0.05, -0.02]),
+                 "T_L1": jnp.array([0.05, 0.02, 0.01]), "T_s": mp.T_s, "nn_scale": mp.nn_scale}
+    for i in range(len(mspec.nn_shapes)):
+        map_sites[f"nn_W{i}"], map_sites[f"nn_b{i}"] = mp.nn.weights[i], mp.nn.biases[i]
+    speed_sites = {"omega0": p.omega0, "om_scale": p.nn_scale, "tau_f": jnp.asarray(0.004)}
+    for i in range(len(spec.nn_shapes)):
+        speed_sites[f"om_W{i}"], speed_sites[f"om_b{i}"] = p.nn.weights[i], p.nn.biases[i]
+    mu, sign = jnp.array([16.0, 17.0]), jnp.array([1.0, -1.0])
+    f_obs, f_se = jnp.array([2.40, 2.47]), jnp.array([1e-3, 2e-3])
+    t = jnp.tile(jnp.linspace(0.0, 1.0, 11), (2, 1))
+    model = handlers.substitute(handlers.seed(speed_model, 0), data=speed_sites)
+    tr = handlers.trace(model).get_trace(
+        spec, mspec, map_sites, mu, sign, jnp.zeros(2), t, jnp.ones(2), f_se, f_obs=f_obs)
+    got = float(tr["f"]["fn"].log_prob(tr["f"]["value"]).sum())
+    params = params_from_sites(map_sites, mspec)
+    f_hat = np.array([float(sp.frequency_hz(p, params, m, s, spec, mspec))
+                      for m, s in zip(mu, sign, strict=True)])
+    sd = np.sqrt(np.asarray(f_se) ** 2 + (0.004 * f_hat) ** 2)
+    assert got == pytest.approx(float(norm.logpdf(np.asarray(f_obs), f_hat, sd).sum()), rel=1e-10)
+
+
+def test_measured_frequency_and_its_standard_error():
+    """A 2.45 Hz rotation with noise: frequency to 1e-4 Hz, standard error from the segments."""
+    from bayeshopf.inference.speed import measured_frequency, measured_frequency_se
+
+    t = np.arange(0, 20, 1 / 500)
+    rng = np.random.default_rng(0)
+    ph = 2 * np.pi * 2.45 * t + 0.3 * np.sin(2 * np.pi * 0.05 * t)  # slow wander
+    w = np.stack([np.cos(ph), np.sin(ph)], -1) + 0.01 * rng.standard_normal((t.size, 2))
+    # reference: the least-squares slope of the planted phase itself
+    assert measured_frequency(w, t) == pytest.approx(np.polyfit(t, ph, 1)[0] / (2 * np.pi),
+                                                     abs=1e-4)
+    se = measured_frequency_se(w, t)
+    f_seg = [measured_frequency(w[k], t[k]) for k in np.array_split(np.arange(t.size), 5)]
+    assert se == pytest.approx(np.std(f_seg, ddof=1) / np.sqrt(5))
+    assert 1e-4 < se < 1e-2
+
+
 # -- fitted: planted speed on synthetic data, and the wind-tunnel recordings ------------------
 
 
@@ -90,24 +139,46 @@ def synthetic():
 def test_planted_frequency_inside_band(synthetic):
     """The 90% frequency band covers the planted ω(r(μ))/2π at training and held-out μ.
 
-    Stable branch: every band covers the truth. Unstable branch (small orbits,
-    near the Hopf point; map fitted with the fast settings): the bands are
-    biased by up to about 0.1%, so only the relative error is bounded there.
+    Stable branch: every band covers the truth, up to two Monte Carlo standard
+    errors of its end points (quantiles of a few hundred draws; one planted
+    value sits 4e-6 Hz outside an edge whose Monte Carlo error is ~1e-4 Hz).
+    Unstable branch (small orbits, near the Hopf point; map fitted with the
+    fast settings): the bands are biased by up to about 0.1%, so only the
+    relative error is bounded there.
     """
     rs, truth, sf, _ = synthetic
     cases = [(r.mu, r.branch) for r in rs] + [(16.0, "stable"), (19.0, "stable"),
                                                (16.0, "unstable")]
     missed, rel = [], []
     for mu, branch in cases:
+        x = sf.frequency(mu, branch)[:, 0]
+        x = x[np.isfinite(x)]
         iv = sf.frequency_interval(mu, branch)
         f = float(truth.frequency_hz(mu, branch))
+        # Monte Carlo standard error of a 5% quantile: √(p(1−p)/n) / density there,
+        # the density from the draws in a window about the quantile
+        win = 0.1 * (iv.hi - iv.lo)
+        dens = np.mean(np.abs(x - iv.lo) < win) / (2 * win)
+        mc = np.sqrt(0.05 * 0.95 / x.size) / dens
         print(f"{branch:8s} mu={mu:5.2f}  true {f:.4f} Hz  band [{iv.lo:.4f}, {iv.hi:.4f}]"
-              f"  inside: {iv.contains(f)}")
+              f"  inside: {iv.contains(f)}  (Monte Carlo error of the edges {mc:.1e} Hz)")
         rel.append(abs(iv.median / f - 1.0))
-        if branch == "stable" and not iv.contains(f):
-            missed.append((mu, branch, f, iv))
+        if branch == "stable" and not (iv.lo - 2 * mc <= f <= iv.hi + 2 * mc):
+            missed.append((mu, branch, f, iv, mc))
     assert not missed, missed
     assert max(rel) < 3e-3, rel
+
+
+def test_training_frequencies_inside_predictive_band(synthetic):
+    """Every training recording's measured frequency lies in its 90% predictive band (curve + τ)."""
+    rs, _, sf, _ = synthetic
+    assert "tau_f" in sf.samples and np.all(np.asarray(sf.samples["tau_f"]) >= 0)
+    for i, r in enumerate(rs):
+        pv = sf.frequency_interval(r.mu, r.branch, predictive=True)
+        cv = sf.frequency_interval(r.mu, r.branch)
+        tol = 1e-4 * cv.median  # the two bands' quantiles come from different draws
+        assert pv.lo <= cv.lo + tol and cv.hi <= pv.hi + tol  # the predictive band is the wider
+        assert pv.contains(abs(sf.data.measured_hz[i])), (r.name, pv, sf.data.measured_hz[i])
 
 
 def test_time_series_shapes_and_units(synthetic):
@@ -162,12 +233,10 @@ def wind_tunnel():
 def test_wind_tunnel_frequency_and_phase(wind_tunnel):
     """Measured frequencies against their 90% bands; phase error after 10 periods.
 
-    The phase error is predicted from each record's first point (curve; the
-    recording offsets are off by default, so both printed errors agree).
+    The phase error is predicted from each record's first point on the curve.
     """
     rs, hf, sf = wind_tunnel
-    err = sf.phase_error(rs, n_periods=10.0, fitted_offsets=True)
-    err_curve = sf.phase_error(rs, n_periods=10.0)
+    err = sf.phase_error(rs, n_periods=10.0)
     missed = []
     for i, r in enumerate(rs):
         iv = sf.frequency_interval(r.mu, r.branch, predictive=True)
@@ -176,22 +245,49 @@ def test_wind_tunnel_frequency_and_phase(wind_tunnel):
         print(f"{r.name:22s} mu={r.mu:5.2f} measured {f:.4f} Hz "
               f"(features {abs(hf.features.frequency_hz[i]):.4f})  "
               f"curve {cv.median:.4f} [{cv.lo:.4f}, {cv.hi:.4f}]  "
-              f"predictive [{iv.lo:.4f}, {iv.hi:.4f}]  phase err {err[i]:.3f} rad "
-              f"(curve only {err_curve[i]:.3f})")
+              f"predictive [{iv.lo:.4f}, {iv.hi:.4f}]  phase err {err[i]:.3f} rad")
         if not iv.contains(f):
             missed.append((r.name, f, iv))
-    # Only 3 of the 7 measured frequencies (mean over the whole 20 s record) are
-    # inside their 90% curve bands (about ±0.2%): the curve cannot follow the
-    # unstable 16.5 m/s record (1.2% faster than the stable one at the same μ),
-    # and three others miss by 0.01-0.3%. The error is bounded instead:
-    print(f"{len(rs) - len(missed)} of {len(rs)} measured frequencies inside the 90% band")
+    tau = np.quantile(np.asarray(sf.samples["tau_f"]), [0.05, 0.5, 0.95])
+    print(f"frequency scatter between recordings tau = {tau[1]:.4f} [{tau[0]:.4f}, {tau[2]:.4f}]")
+    # every measured frequency (mean over its whole 20 s record) lies in its 90%
+    # predictive band: the curve Ω(r, θ, μ) plus the scatter τ between recordings
+    assert not missed, missed
     rel = [abs(sf.frequency_interval(r.mu, r.branch).median / abs(sf.data.measured_hz[i]) - 1)
            for i, r in enumerate(rs)]
-    assert max(rel) < 0.015, rel
-    assert len(missed) <= 4, missed
+    assert max(rel) < 0.01, rel
+    assert 0.001 < tau[1] < 0.01, tau
     stable = ~rs.is_unstable
     assert np.all(err[stable] < 0.5), err
     assert np.all(err < 0.7), err
+
+
+@pytest.mark.slow
+def test_flutter3dof_frequencies_against_the_continuation():
+    """3-DOF aerofoil, blind: the true 1/T of every training and held-out orbit in its curve band.
+
+    The truth is the period of the Newton-corrected periodic orbit; the phase
+    error after 10 periods is bounded on training and on new (held-out) records.
+    """
+    from bayeshopf.inference.speed import fit_speed
+    from bayeshopf.pipeline import fit
+    from bayeshopf.simulators.truth import flutter_experiment, held_out_recordings
+
+    rs, truth = flutter_experiment(0)
+    hf = fit(rs, "subcritical", seed=0, progress=False)
+    sf = fit_speed(hf, rs, seed=0, progress=False)
+    missed = []
+    for mu, branch in truth.plan + truth.held_out:
+        f = 1.0 / truth.diagram.orbit_at(mu, branch).period
+        iv = sf.frequency_interval(mu, branch)
+        print(f"{branch:8s} {mu:5.2f} true {f:.4f} Hz band [{iv.lo:.4f}, {iv.hi:.4f}]")
+        assert abs(iv.median / f - 1) < 1e-3, (mu, branch, f, iv)
+        if not iv.contains(f):
+            missed.append((mu, branch, f, iv))
+    assert not missed, missed
+    err = np.concatenate([sf.phase_error(rs), sf.phase_error(held_out_recordings(truth))])
+    print("phase errors after 10 periods (rad):", np.round(err, 3))
+    assert np.all(err < 1.0), err
 
 
 def test_plots_draw(synthetic, tmp_path):
@@ -206,6 +302,9 @@ def test_plots_draw(synthetic, tmp_path):
     mus = np.linspace(15.2, 19.5, 12)
     fb = [sf.frequency_band(mus, "stable"), sf.frequency_band(mus[mus < 18], "unstable")]
     meas = [(r.mu, sf.data.measured_hz[i], r.branch) for i, r in enumerate(rs)]
-    fig2 = plot_frequency(fb, meas, mu_label="airspeed", mu_units="m/s")
+    pb = [sf.frequency_band(mus, "stable", predictive=True)]
+    tol = 1e-4 * np.nanmax(fb[0].median)
+    assert np.all(pb[0].lo <= fb[0].lo + tol) and np.all(pb[0].hi >= fb[0].hi - tol)
+    fig2 = plot_frequency(fb, meas, predictive=pb, mu_label="airspeed", mu_units="m/s")
     for f, name in ((fig, "ts.png"), (fig2, "freq.png")):
         assert save_figure(f, tmp_path / name).stat().st_size > 1000

@@ -5,25 +5,42 @@ r"""The third training stage: the oscillation speed Ω from the measured time se
 * ``ω0 ~ Normal(ω̄, 0.1|ω̄|)`` with ``ω̄ = 2π f̄`` the mean measured (signed)
   frequency;
 * ``NN_Ω`` weights and biases ``~ Normal(0, 1)`` (scaled by ``1/√fan_in``),
-  output scale ``s_Ω ~ HalfNormal(0.05|ω̄|)``: a priori the speed varies by a few
-  per cent along and between orbits;
+  output scale ``s_Ω ~ HalfNormal(s|ω̄|)`` with
+  ``s = max(0.05, 2 (f_max − f_min)/f̄)`` from the measured frequencies: a
+  priori the speed varies along and between orbits by a few per cent, or by
+  as much as the recordings' frequencies do (17% across the Van der Pol
+  plan, whose frequency curve a 5% scale held 1–2% too low);
 * initial phases ``θ0_i ~ Normal(θ0_i*, 0.2)`` centred on the root of eq.
   (zp_ang) for the first measured point: one noisy sample fixes the phase only
   to about noise/radius, and a fixed wrong θ0 would be traded against a biased
   frequency over the window;
-* optionally (``SpeedSettings(recording_offsets=True)``; off by default) a
-  frequency offset per recording, ``Ω_i = Ω + τ ε_i`` with
-  ``ε_i ~ Normal(0, 1)`` (site ``rec_omega``) and ``τ ~ HalfNormal(0.003|ω̄|)``
-  (site ``om_tau``): recordings at the same μ differ in frequency by more than
-  a smooth Ω(r, θ, μ) allows (control, drift, and at the fold the two branches
-  meet with one r but were measured with different frequencies). Like the
-  scatter σ of the map's features, τ makes the *predictive* frequency band
-  (where a new recording's frequency is expected); the *curve* band is Ω's.
-  **Off by default**: on planted data the offsets absorbed the trend with μ
-  and r (they get a direct gradient and fit first), and the curve came out
-  1–3% wrong and flat, with τ's prior at ``0.01|ω̄|`` and at ``0.003|ω̄|``;
-* noise ``σ_j ~ HalfNormal(0.2 ρ)`` per planar channel (frame units, ρ the orbit
-  scale); it absorbs the measurement noise and the map's shape error;
+* the **mean frequency of every recording** over its whole record, ``f_i``
+  (the slope of the unwrapped frame angle, with its standard error ``s_i``
+  from the spread over 5 segments), is observed too:
+
+  .. math::  f_i \sim \mathcal N\big(\hat f_i,\ \sqrt{s_i^2 + (\tau \hat f_i)^2}\big),
+     \qquad \hat f_i = 1/\oint d\theta/\Omega(r_i, \theta, \mu_i),
+     \qquad \tau \sim \mathrm{HalfNormal}(0.01).
+
+  The time series alone pinned the mean frequency poorly (the map's shape
+  error dominates their residuals): the Van der Pol curve came out 0.1–1.3%
+  low. ``τ`` (site ``tau_f``) is the relative scatter of the recordings'
+  frequencies about the curve: recordings at the same μ differ by more than a
+  smooth Ω(r, θ, μ) allows (the control is not perfectly non-invasive,
+  records drift, and at the fold the two branches meet with one r but were
+  measured at different frequencies). Like the scatter σ of the map's
+  features, it makes the *predictive* frequency band (where a new
+  recording's frequency is expected: ω0 + τ|ω̄|ε); the *curve* band is Ω's.
+  (Per-recording frequency offsets in the time-series likelihood instead let
+  the offsets absorb the trend with μ and r on planted data: the curve came
+  out 1–3% wrong and flat.)
+* noise ``σ_ij ~ HalfNormal(0.2 ρ_i)`` per recording ``i`` and planar channel
+  ``j`` (frame units, ``ρ_i`` the RMS radius of recording ``i`` about its own
+  centre); it absorbs the measurement noise and the map's shape error, which
+  scale with the orbit. One σ shared by all recordings let the largest orbits
+  set it, and the smallest (the unstable orbit nearest the Hopf point, 4×
+  smaller) then carried almost no weight: its frequency came out 1.2% off on
+  the wind-tunnel rig;
 * likelihood ``w_i(t_k) ~ Normal(ŵ_i(t_k), σ)`` with
   ``ŵ_i(t) = U12(r_i[cos θ_i(t), sin θ_i(t)], μ̃_i)``,
   ``θ̇_i = Ω(r_i, θ_i, μ_i)``, ``θ_i(0)`` from eq. (zp_ang), on a short window
@@ -99,7 +116,6 @@ class SpeedSettings:
         samples_per_period: Target samples per period after downsampling.
         likelihood_weight: Power of the likelihood (``None``: ``1/samples_per_period``,
             one effective observation per period; module docstring).
-        recording_offsets: Fit a frequency offset per recording (module docstring).
         adam_steps: MAP Adam iterations.
         lbfgs_steps: MAP L-BFGS iterations.
         svi_steps: SVI iterations.
@@ -113,7 +129,6 @@ class SpeedSettings:
     n_periods: float = 10.0
     samples_per_period: int = 30
     likelihood_weight: float | None = None
-    recording_offsets: bool = False
     adam_steps: int = 250
     lbfgs_steps: int = 60
     svi_steps: int = 600
@@ -128,19 +143,23 @@ class SpeedData:
     Attributes:
         t: Times, shape ``(n_rec, n_t)``.
         w: Measured planar points in the frame, shape ``(n_rec, n_t, 2)``.
+        radius: RMS radius of each window about its own centre (frame units).
         mu: μ per recording.
         sign: Branch sign per recording.
         theta0: Initial normal-form phase per recording (map's MAP point).
         measured_hz: Mean measured frequency over the whole record, per recording.
+        measured_se: Its standard error (spread of the frequency over segments).
         names: Recording names.
     """
 
     t: np.ndarray
     w: np.ndarray
+    radius: np.ndarray
     mu: np.ndarray
     sign: np.ndarray
     theta0: np.ndarray
     measured_hz: np.ndarray
+    measured_se: np.ndarray
     names: tuple[str, ...]
 
 
@@ -149,6 +168,19 @@ def measured_frequency(w: np.ndarray, t: np.ndarray) -> float:
     ang = np.unwrap(np.arctan2(w[:, 1], w[:, 0]))
     slope = np.polyfit(t - t[0], ang, 1)[0]
     return float(slope / (2.0 * np.pi))
+
+
+def measured_frequency_se(w: np.ndarray, t: np.ndarray, n_segments: int = 5) -> float:
+    """Standard error (Hz) of :func:`measured_frequency`: ``sd/√n`` over ``n_segments`` segments."""
+    f = [measured_frequency(w[k], t[k]) for k in np.array_split(np.arange(len(t)), n_segments)]
+    return float(np.std(f, ddof=1) / np.sqrt(n_segments))
+
+
+#: Smallest prior scale of the speed MLP's output, relative to |ω̄| (module docstring).
+MIN_SPREAD = 0.05
+
+#: Prior scale of the relative frequency scatter τ between recordings.
+TAU_PRIOR = 0.01
 
 
 def _initial_phases(map_sites: dict, map_spec: ModelSpec, mu, sign, w1):
@@ -164,11 +196,12 @@ def prepare_speed_data(recordings: RecordingSet, map_spec: ModelSpec, map_sites:
     Raises:
         FitError: If a recording is shorter than two periods.
     """
-    ws, ts, freqs = [], [], []
+    ws, ts, freqs, ses = [], [], [], []
     for r in recordings:
         w = np.asarray(map_spec.frame.to_frame(r.planar(recordings.planar)))
         f = measured_frequency(w, r.t)
         freqs.append(f)
+        ses.append(measured_frequency_se(w, r.t))
         stride = max(1, int(round(1.0 / (abs(f) * r.dt * settings.samples_per_period))))
         n_win = int(settings.n_periods / (abs(f) * r.dt))
         if n_win < 2.0 / (abs(f) * r.dt):
@@ -184,30 +217,45 @@ def prepare_speed_data(recordings: RecordingSet, map_spec: ModelSpec, map_sites:
     if not np.all(np.isfinite(theta0)):
         bad = [n for n, x in zip(recordings.names, theta0, strict=True) if not np.isfinite(x)]
         raise FitError(f"no LCO of the map's MAP point at the recording(s) {bad}")
-    return SpeedData(t, w, mu, sign, theta0, np.array(freqs), tuple(recordings.names))
+    radius = np.sqrt(np.mean(np.sum((w - w.mean(axis=1, keepdims=True)) ** 2, axis=-1), axis=-1))
+    return SpeedData(t, w, radius, mu, sign, theta0, np.array(freqs), np.array(ses),
+                     tuple(recordings.names))
 
 
 def _batched_trajectories(spec: sp.SpeedSpec, map_spec: ModelSpec):
     """Jitted ``(speed sites, map sites, μ, sign, θ0, t) ↦ ŵ`` for all recordings."""
 
     def build():
-        def f(om_sites, map_sites, mu, sign, theta0, t, offset):
+        def f(om_sites, map_sites, mu, sign, theta0, t):
             p = sp.speed_params_from_sites(om_sites, spec)
             mp = hybrid.params_from_sites(map_sites, map_spec)
 
-            def one(m, s, th, tt, d):
-                q = p._replace(omega0=p.omega0 + d)
-                return sp.trajectory_in_frame(q, mp, m, s, th, tt, spec, map_spec)
+            def one(m, s, th, tt):
+                return sp.trajectory_in_frame(p, mp, m, s, th, tt, spec, map_spec)
 
-            return jax.vmap(one)(mu, sign, theta0, t, offset)
+            return jax.vmap(one)(mu, sign, theta0, t)
 
         return f
 
     return hybrid.jit_for_spec(map_spec, f"speed-traj-{hash(spec)}", build)
 
 
+def _batched_frequencies(spec: sp.SpeedSpec, map_spec: ModelSpec):
+    """Jitted ``(speed sites, map sites, μ, sign) ↦ f̂`` (Hz) for all recordings."""
+
+    def build():
+        def f(om_sites, map_sites, mu, sign):
+            p = sp.speed_params_from_sites(om_sites, spec)
+            mp = hybrid.params_from_sites(map_sites, map_spec)
+            return jax.vmap(lambda m, s: sp.frequency_hz(p, mp, m, s, spec, map_spec))(mu, sign)
+
+        return f
+
+    return hybrid.jit_for_spec(map_spec, f"speed-freq-obs-{hash(spec)}", build)
+
+
 def speed_model(spec: sp.SpeedSpec, map_spec: ModelSpec, map_sites: dict, mu, sign, theta0, t,
-                y=None, weight: float = 1.0, offsets: bool = False):
+                radius, f_se, y=None, f_obs=None, weight: float = 1.0):
     """NumPyro model of the measured planar time series given the map (module docstring).
 
     Args:
@@ -218,13 +266,16 @@ def speed_model(spec: sp.SpeedSpec, map_spec: ModelSpec, map_sites: dict, mu, si
         sign: Branch sign per recording.
         theta0: Prior centre of the initial phase per recording (eq. zp_ang).
         t: Times, ``(n_rec, n_t)``.
+        radius: RMS radius of each recording in the frame, ``(n_rec,)`` (noise prior scale).
+        f_se: Standard error of each recording's mean frequency (Hz), ``(n_rec,)``.
         y: Measured frame points ``(n_rec, n_t, 2)``, or ``None`` to draw them.
-        weight: Power of the likelihood (its log density is multiplied by it).
-        offsets: Sample a frequency offset per recording (``om_tau``, ``rec_omega``).
+        f_obs: Measured mean frequency of each recording (Hz, > 0), or ``None`` to draw it.
+        weight: Power of the time-series likelihood (its log density is multiplied by it).
     """
     om_ref = spec.omega_ref
     sites = {"omega0": numpyro.sample("omega0", dist.Normal(om_ref, 0.1 * abs(om_ref)))}
-    sites["om_scale"] = numpyro.sample("om_scale", dist.HalfNormal(0.05 * abs(om_ref)))
+    sites["om_scale"] = numpyro.sample("om_scale",
+                                       dist.HalfNormal(spec.omega_spread * abs(om_ref)))
     for i, (n_in, n_out) in enumerate(spec.nn_shapes):
         sites[f"om_W{i}"] = numpyro.sample(
             f"om_W{i}", dist.Normal(0.0, 1.0).expand([n_in, n_out]).to_event(2)
@@ -233,18 +284,17 @@ def speed_model(spec: sp.SpeedSpec, map_spec: ModelSpec, map_sites: dict, mu, si
             f"om_b{i}", dist.Normal(0.0, 1.0).expand([n_out]).to_event(1)
         )
     sigma = numpyro.sample(
-        "sigma_t", dist.HalfNormal(0.2 * map_spec.orbit_scale).expand([2]).to_event(1)
+        "sigma_t", dist.HalfNormal(0.2 * jnp.stack([radius, radius], -1)).to_event(2)
     )
-    if offsets:
-        sites["om_tau"] = numpyro.sample("om_tau", dist.HalfNormal(0.003 * abs(om_ref)))
+    tau = numpyro.sample("tau_f", dist.HalfNormal(TAU_PRIOR))
     with numpyro.plate("recordings", mu.shape[0]):
         th0 = numpyro.sample("theta0", dist.Normal(theta0, THETA0_SD))
-        if offsets:
-            eps = numpyro.sample("rec_omega", dist.Normal(0.0, 1.0))
-    offset = sites["om_tau"] * eps if offsets else jnp.zeros(mu.shape[0])
-    pred = _batched_trajectories(spec, map_spec)(sites, map_sites, mu, sign, th0, t, offset)
+    pred = _batched_trajectories(spec, map_spec)(sites, map_sites, mu, sign, th0, t)
     with numpyro.plate("recordings", mu.shape[0]), numpyro.handlers.scale(scale=weight):
-        numpyro.sample("y", dist.Normal(pred, sigma).to_event(2), obs=y)
+        numpyro.sample("y", dist.Normal(pred, sigma[:, None, :]).to_event(2), obs=y)
+    f_hat = _batched_frequencies(spec, map_spec)(sites, map_sites, mu, sign)
+    with numpyro.plate("recordings", mu.shape[0]):
+        numpyro.sample("f", dist.Normal(f_hat, jnp.sqrt(f_se**2 + (tau * f_hat) ** 2)), obs=f_obs)
 
 
 @dataclass(frozen=True)
@@ -337,10 +387,9 @@ class SpeedFit:
     def frequency(self, mu, branch: str = "stable", predictive: bool = False) -> np.ndarray:
         """Draws of the LCO frequency ``f = 1/∮dθ/Ω`` in Hz, shape ``(n_draws, n_mu)``.
 
-        ``predictive=True`` adds a new recording's offset ``τ ε`` to Ω (the band
-        where a new measurement's frequency is expected; the same as the curve
-        without ``recording_offsets``). ``nan`` where a draw
-        has no LCO on ``branch`` at μ.
+        ``predictive=True`` draws a new recording's frequency ``f (1 + τ ε)`` (the
+        band where a new measurement's frequency is expected; module docstring).
+        ``nan`` where a draw has no LCO on ``branch`` at μ.
         """
         return frequency_draws(self.spec, self.map_spec, self.samples, self.map_samples, mu,
                                branch, predictive=predictive, seed=self.seed)
@@ -352,7 +401,7 @@ class SpeedFit:
         return interval(x[np.isfinite(x)])
 
     def time_series(self, mu: float, branch: str, t, *, theta0=None,
-                    initial_point=None, omega_offset=None) -> np.ndarray:
+                    initial_point=None) -> np.ndarray:
         """Predicted planar time series in physical units, shape ``(n_draws, n_t, 2)``.
 
         Args:
@@ -363,8 +412,6 @@ class SpeedFit:
             initial_point: Measured point ``(z1, z2)`` at ``t[0]`` in physical
                 units; each map draw finds its own θ0 from it (eq. zp_ang).
                 Exactly one of ``theta0`` and ``initial_point`` must be given.
-            omega_offset: Per-draw offset added to ω0, shape ``(n_draws,)``
-                (e.g. a training recording's fitted ``τ ε_i``); default none.
         """
         if (theta0 is None) == (initial_point is None):
             raise ValueError("give exactly one of theta0 and initial_point")
@@ -382,34 +429,23 @@ class SpeedFit:
         th0 = jnp.asarray(0.0 if theta0 is None else float(theta0))
 
         def build():
-            def f(om_sites, map_sites, mu, th0, w1, t, off):
-                def one(o, m, d):
+            def f(om_sites, map_sites, mu, th0, w1, t):
+                def one(o, m):
                     p = sp.speed_params_from_sites(o, spec)
-                    p = p._replace(omega0=p.omega0 + d)
                     mp = hybrid.params_from_sites(m, mspec)
                     th = sp.initial_phase(mp, mu, sign, w1, mspec) if use_point else th0
                     w = sp.trajectory_in_frame(p, mp, mu, sign, th, t, spec, mspec)
                     return mspec.frame.from_frame(w)
 
-                return jax.vmap(one)(om_sites, map_sites, off)
+                return jax.vmap(one)(om_sites, map_sites)
 
             return f
 
         f = hybrid.jit_for_spec(mspec, f"speed-ts-{hash(spec)}-{sign}-{use_point}", build)
-        off = (jnp.zeros(self.n_draws) if omega_offset is None
-               else jnp.broadcast_to(jnp.asarray(omega_offset, dtype=float), (self.n_draws,)))
         return np.asarray(f(self._speed_sites(), self._map_sites(), jnp.asarray(float(mu)),
-                            th0, w1, t, off))
+                            th0, w1, t))
 
-    def recording_offset(self, name: str) -> np.ndarray:
-        """Draws of the fitted frequency offset ``τ ε_i`` (rad/s) of training recording ``name``."""
-        if "om_tau" not in self.samples:
-            return np.zeros(self.n_draws)
-        i = self.data.names.index(name)
-        return np.asarray(self.samples["om_tau"]) * np.asarray(self.samples["rec_omega"])[:, i]
-
-    def phase_error(self, recordings: RecordingSet, n_periods: float = 10.0,
-                    *, fitted_offsets: bool = False) -> np.ndarray:
+    def phase_error(self, recordings: RecordingSet, n_periods: float = 10.0) -> np.ndarray:
         """RMS phase error (rad) over the ``n_periods``-th period of each recording.
 
         Each recording is predicted from its first measured point
@@ -417,8 +453,6 @@ class SpeedFit:
         difference between the measured and the predicted angle about the frame
         centre, ``wrap(ang(w(t)) − ang(ŵ(t)))``, its median over draws, and the
         RMS over the samples of the last period before ``n_periods`` periods.
-        ``fitted_offsets=True`` uses each training recording's fitted frequency
-        offset (the model as fitted to that recording; the curve otherwise).
 
         Returns:
             One error per recording, shape ``(n_rec,)``.
@@ -432,9 +466,7 @@ class SpeedFit:
             t = r.t - r.t[0]
             stride = max(1, int(round(period_s / (40 * r.dt))))
             sel = np.flatnonzero(t <= n_periods * period_s)[::stride]
-            off = self.recording_offset(r.name) if fitted_offsets else None
-            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0],
-                                    omega_offset=off)
+            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0])
             wp = np.asarray(frame.to_frame(pred.reshape(-1, 2))).reshape(pred.shape)
             d = np.angle(np.exp(1j * (np.arctan2(w[sel, 1], w[sel, 0])[None]
                                       - np.arctan2(wp[..., 1], wp[..., 0]))))
@@ -447,8 +479,7 @@ class SpeedFit:
                           channel: int = 0) -> list[TimeSeriesBand]:
         """Median and 90% band of one channel over the first ``n_periods`` of each recording.
 
-        Each prediction starts from the recording's first measured point and
-        uses the recording's fitted frequency offset when it is a training one.
+        Each prediction starts from the recording's first measured point.
         """
         out = []
         for r in recordings:
@@ -457,9 +488,7 @@ class SpeedFit:
             t = r.t - r.t[0]
             stride = max(1, int(round(1.0 / (f * 60 * r.dt))))
             sel = np.flatnonzero(t <= n_periods / f)[::stride]
-            off = self.recording_offset(r.name) if r.name in self.data.names else None
-            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0],
-                                    omega_offset=off)[..., channel]
+            pred = self.time_series(r.mu, r.branch, t[sel], initial_point=z[0])[..., channel]
             q = np.nanquantile(pred, [0.5, 0.05, 0.95], axis=0)
             name = recordings.planar[channel]
             out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], t[sel],
@@ -496,24 +525,19 @@ def frequency_draws(spec: sp.SpeedSpec, map_spec: ModelSpec, samples: dict, map_
     """Frequency draws (Hz) ``(n_draws, n_mu)``: speed draw i with map draw i.
 
     ``f = 1/T``, ``T = ∫₀^{2π} dθ/Ω(r_i(μ), θ, μ)`` (:func:`bayeshopf.model.speed.period`);
-    ``predictive=True`` replaces ω0 by ``ω0 + τ ε``, ``ε ~ Normal(0, 1)`` (a new recording).
+    ``predictive=True`` draws a new recording's frequency, ``f (1 + τ ε)``,
+    ``ε ~ Normal(0, 1)``, with the draw's scatter τ (site ``tau_f``).
     """
     sign = _sign(branch)
 
     def build():
-        def f(om_sites, map_sites, mu, eps):
-            def one(o, m, e):
+        def f(om_sites, map_sites, mu):
+            def one(o, m):
                 p = sp.speed_params_from_sites(o, spec)
                 mp = hybrid.params_from_sites(m, map_spec)
+                return jax.vmap(lambda x: sp.frequency_hz(p, mp, x, sign, spec, map_spec))(mu)
 
-                def at(x, ei):
-                    tau = o["om_tau"] if "om_tau" in o else 0.0
-                    q = p._replace(omega0=p.omega0 + tau * ei)
-                    return sp.frequency_hz(q, mp, x, sign, spec, map_spec)
-
-                return jax.vmap(at)(mu, e)
-
-            return jax.vmap(one)(om_sites, map_sites, eps)
+            return jax.vmap(one)(om_sites, map_sites)
 
         return f
 
@@ -521,10 +545,12 @@ def frequency_draws(spec: sp.SpeedSpec, map_spec: ModelSpec, samples: dict, map_
     mu = jnp.atleast_1d(jnp.asarray(mu, dtype=float))
     om = {k: jnp.asarray(v) for k, v in samples.items() if k.startswith(("om", "omega"))}
     ms = {k: jnp.asarray(v) for k, v in map_samples.items()}
-    n = om["omega0"].shape[0]
-    eps = (jax.random.normal(jax.random.PRNGKey(seed), (n, mu.shape[0])) if predictive
-           else jnp.zeros((n, mu.shape[0])))
-    return np.asarray(f(om, ms, mu, eps))
+    out = np.asarray(f(om, ms, mu))
+    if predictive:
+        tau = np.asarray(samples.get("tau_f", np.zeros(out.shape[0])), dtype=float)
+        eps = np.random.default_rng(seed).standard_normal(out.shape)
+        out = out * (1.0 + tau[:, None] * eps)
+    return out
 
 
 SPEED_DRAWS = "speed.npz"
@@ -539,7 +565,7 @@ def save_speed(speed_fit: SpeedFit, folder) -> list:
     """
     folder = Path(folder)
     arrays = {f"speed/{k}": np.asarray(v) for k, v in speed_fit.samples.items()
-              if k.startswith(("om", "omega"))}
+              if k.startswith(("om", "omega", "tau"))}
     arrays.update({f"map/{k}": np.asarray(v) for k, v in speed_fit.map_samples.items()})
     tmp = folder / (SPEED_DRAWS + ".tmp.npz")
     np.savez(tmp, **arrays)
@@ -597,24 +623,24 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     data = prepare_speed_data(recordings, mspec, {k: jnp.asarray(v) for k, v in map_point.items()},
                               settings)
     omega_ref = float(2.0 * np.pi * np.mean(data.measured_hz))
+    f = np.abs(data.measured_hz)
     spec = sp.SpeedSpec(
         n_h=settings.n_h, nn_width=settings.nn_width, nn_depth=settings.nn_depth,
-        omega_ref=omega_ref, r_scale=typical_radius(mspec),
+        omega_ref=omega_ref, omega_spread=max(MIN_SPREAD, 2.0 * float(np.ptp(f) / np.mean(f))),
+        r_scale=typical_radius(mspec),
     )
     kwargs = dict(
         spec=spec, map_spec=mspec, map_sites={k: jnp.asarray(v) for k, v in map_point.items()},
         mu=jnp.asarray(data.mu), sign=jnp.asarray(data.sign), theta0=jnp.asarray(data.theta0),
-        t=jnp.asarray(data.t), y=jnp.asarray(data.w),
+        t=jnp.asarray(data.t), radius=jnp.asarray(data.radius), y=jnp.asarray(data.w),
+        f_se=jnp.asarray(data.measured_se), f_obs=jnp.asarray(np.abs(data.measured_hz)),
         weight=(1.0 / settings.samples_per_period if settings.likelihood_weight is None
                 else float(settings.likelihood_weight)),
-        offsets=settings.recording_offsets,
     )
     timings["prepare"] = time.perf_counter() - t0
     k_map, k_svi = jax.random.split(jax.random.PRNGKey(seed))
-    init = {"omega0": omega_ref, "om_scale": 1e-3 * abs(omega_ref),
-            **({"om_tau": 1e-3 * abs(omega_ref), "rec_omega": np.zeros(len(data.mu))}
-               if settings.recording_offsets else {}),
-            "sigma_t": np.full(2, 0.05 * mspec.orbit_scale), "theta0": data.theta0}
+    init = {"omega0": omega_ref, "om_scale": 1e-3 * abs(omega_ref), "tau_f": 0.5 * TAU_PRIOR,
+            "sigma_t": 0.05 * np.stack([data.radius, data.radius], -1), "theta0": data.theta0}
     for i, (n_in, n_out) in enumerate(spec.nn_shapes):
         init[f"om_W{i}"] = 0.5 * np.asarray(
             jax.random.normal(jax.random.fold_in(k_map, i), (n_in, n_out)))
@@ -634,7 +660,7 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
                          num_particles=settings.num_particles, n_draws=n_draws,
                          progress=progress, obs_name="y", init_scale=SPEED_INIT_SCALE)
     timings["svi"] = time.perf_counter() - t0
-    samples = {k: v for k, v in svi_result.samples.items() if k != "y_rep"}
+    samples = {k: v for k, v in svi_result.samples.items() if k not in ("y_rep", "f")}
     map_samples = {k: np.asarray(hopf_fit.samples[k])[:n_draws] for k in keys}
     return SpeedFit(spec=spec, map_spec=mspec, samples=samples, map_samples=map_samples,
                     map_point=map_point, data=data, map=map_result, svi=svi_result, seed=seed,

@@ -52,6 +52,8 @@ class SpeedSpec:
         nn_width: Neurons per hidden layer of the speed MLP.
         nn_depth: Hidden layers of the speed MLP.
         omega_ref: Prior centre of ω0 (rad/s), from the measured frequencies.
+        omega_spread: Prior scale of the speed MLP's output scale, relative to
+            ``|omega_ref|`` (from the spread of the measured frequencies).
         r_scale: Scale of the radius input (the typical normal-form radius).
         rtol: Relative tolerance of the phase ODE.
         atol: Absolute tolerance of the phase ODE.
@@ -63,6 +65,7 @@ class SpeedSpec:
     nn_width: int = 8
     nn_depth: int = 1
     omega_ref: float = 1.0
+    omega_spread: float = 0.05
     r_scale: float = 1.0
     rtol: float = 1e-6
     atol: float = 1e-6

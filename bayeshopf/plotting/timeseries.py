@@ -55,12 +55,16 @@ def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
     return fig
 
 
-def plot_frequency(bands, measured=None, *, mu_label: str = "mu", mu_units: str = "") -> Figure:
+def plot_frequency(bands, measured=None, *, predictive=None, mu_label: str = "mu",
+                   mu_units: str = "") -> Figure:
     """Oscillation frequency against μ: posterior median and 90% band per branch.
 
     Args:
-        bands: :class:`~bayeshopf.inference.speed.FrequencyBand` records.
+        bands: :class:`~bayeshopf.inference.speed.FrequencyBand` records (the curve).
         measured: Optional ``(mu, frequency_hz, branch)`` triples of the recordings.
+        predictive: Optional predictive :class:`~bayeshopf.inference.speed.FrequencyBand`
+            records (``frequency_band(..., predictive=True)``), drawn as dotted edges:
+            where a new recording's frequency is expected.
         mu_label: Name of μ.
         mu_units: Unit of μ.
 
@@ -73,6 +77,10 @@ def plot_frequency(bands, measured=None, *, mu_label: str = "mu", mu_units: str 
         c = BRANCH_COLOURS[b.branch]
         ax.fill_between(b.mu, b.lo, b.hi, color=c, alpha=0.25, lw=0)
         ax.plot(b.mu, b.median, color=c, lw=1.2, label=f"{b.branch} (median, 90%)")
+    for b in predictive or ():
+        c = BRANCH_COLOURS[b.branch]
+        ax.plot(b.mu, b.lo, ":", color=c, lw=1.0, label=f"{b.branch}, new recording (90%)")
+        ax.plot(b.mu, b.hi, ":", color=c, lw=1.0)
     for mu, f, branch in measured or ():
         ax.plot([mu], [abs(f)], BRANCH_MARKERS[branch], color=BRANCH_COLOURS[branch],
                 mfc="none" if branch == "unstable" else BRANCH_COLOURS[branch], ms=5)

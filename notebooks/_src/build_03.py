@@ -20,7 +20,9 @@ This notebook
 2. fits all 7 recordings and compares μ0, a2 and μ_SN (with 90% intervals) with the paper,
 3. refits without each recording in turn, for the Bayesian fit and for point fits (MAP only, and
    maximum likelihood as in the paper), and measures how well each predicts the held-out LCO,
-4. regresses a third channel, the actuator command, on the normal-form state.
+4. regresses a third channel, the actuator command, on the normal-form state,
+5. fits the oscillation speed Ω (the paper's third stage) and predicts frequencies and time series
+   with bands.
 
 The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf). Set `BAYESHOPF_FLUTTER_CBC`
 to their folder, or call `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
@@ -35,16 +37,17 @@ from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
-import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
 from bayeshopf.datasets import flutter_cbc
 from bayeshopf.inference.channels import fit_channel
+from bayeshopf.inference.speed import SpeedSettings, fit_speed
 from bayeshopf.pipeline import FitSettings, fit_auto
 from bayeshopf.plotting import diagram_grid, plot_bifurcation, plot_phase_portraits
 from bayeshopf.plotting.channels import plot_channel
+from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
 from bayeshopf.plotting.validation import plot_leave_one_out
 from bayeshopf.validation import leave_one_out
 
@@ -117,7 +120,7 @@ loo = leave_one_out(rs, "subcritical", seed=0, settings=settings, folds=folds, k
                     progress=False)
 rows = ["| method | held-out inside 90% | mean held-out error | max error | sd of μ_SN over folds | μ_SN range |",
         "|---|---:|---:|---:|---:|---|"]
-for m, s in loo.summary().items():
+for s in loo.summary().values():
     rows.append(f"| {s['label']} | {s['coverage']}/{s['n_folds']} | {100 * s['mean_relative_error']:.1f}% | "
                 f"{100 * s['max_relative_error']:.1f}% | {s['mu_fold_sd']:.3f} m/s | "
                 f"{s['mu_fold_range'][0]:.2f}–{s['mu_fold_range'][1]:.2f} |")
@@ -142,11 +145,52 @@ k-th harmonic is r^k (β0 + β1 μ̃), fitted across recordings by a conjugate B
 repeated over draws of the map's posterior. The bands carry both uncertainties."""),
     new_code_cell("""channel = fit_channel(result, rs, "actuator", n_draws=40 if FAST else 100)
 amp = np.array([np.nanquantile(channel.amplitude(result, [m], "unstable" if u else "stable", predictive=True)[:, 0],
-                               [0.05, 0.95]) for m, u in zip(result.features.mu, result.features.unstable)])
+                               [0.05, 0.95]) for m, u in zip(result.features.mu, result.features.unstable, strict=True)])
 inside = (channel.measured_amplitude >= amp[:, 0]) & (channel.measured_amplitude <= amp[:, 1])
 print(f"actuator peak-to-peak inside its 90% band for {inside.sum()}/{inside.size} recordings")
 fig = plot_channel(channel, result)
 display(fig)"""),
+    new_markdown_cell("""## 6. How fast the oscillations run: the speed Ω and time series
+
+The third training stage fits `Ω(r, θ, μ) = ω0 + NN(r, μ̃)ᵀ[1, cos θ, …, sin n_hθ]` to the measured
+time series given the map, integrating only θ̇ = Ω on each LCO (r is the closed-form radius, so the
+unstable orbits cannot drift away), from the phase that matches each record's first point. The
+speed draws are paired with the map's posterior draws, so the bands carry both uncertainties.
+
+Two bands for the frequency: the **curve** band (Ω's posterior) and the **predictive** band, which
+adds the relative scatter τ of the recordings' frequencies about the curve: where a new recording's
+frequency is expected. Besides the time series, each record's mean frequency over its whole 20 s is
+observed, with that scatter; τ is learnt with the rest of the speed model."""),
+    new_code_cell("""speed_settings = SpeedSettings(adam_steps=100, lbfgs_steps=20, svi_steps=200, n_draws=100) if FAST else SpeedSettings()
+sf = fit_speed(result, rs, seed=0, settings=speed_settings, progress=False)
+err = sf.phase_error(rs, n_periods=10.0)
+tau = np.quantile(np.asarray(sf.samples["tau_f"]), [0.5, 0.05, 0.95])
+rows = ["| recording | μ (m/s) | measured (Hz) | curve median [90%] (Hz) | predictive 90% (Hz) | inside | phase error after 10 periods (rad) |",
+        "|---|---:|---:|---|---|---|---:|"]
+n_in = 0
+for i, r in enumerate(rs):
+    f = abs(sf.data.measured_hz[i])
+    cv, pv = sf.frequency_interval(r.mu, r.branch), sf.frequency_interval(r.mu, r.branch, predictive=True)
+    n_in += pv.contains(f)
+    rows.append(f"| {r.name} | {r.mu:g} | {f:.4f} | {cv.median:.4f} [{cv.lo:.4f}, {cv.hi:.4f}] | "
+                f"[{pv.lo:.4f}, {pv.hi:.4f}] | {'yes' if pv.contains(f) else 'no'} | {err[i]:.3f} |")
+display(Markdown("\\n".join(rows)))
+print(f"{n_in}/{len(rs)} measured frequencies inside their 90% predictive bands; "
+      f"scatter between recordings τ = {100 * tau[0]:.2f}% [{100 * tau[1]:.2f}, {100 * tau[2]:.2f}]")"""),
+    new_markdown_cell("""The frequency against airspeed (curve bands shaded, a new recording's band dotted, the
+recordings as markers) and the paper's Fig. ts_exp with bands: the first periods of each record,
+predicted from its first point."""),
+    new_code_cell("""grid = diagram_grid(result)
+fold_mu = result.interval("mu_fold").median
+stable_mu = grid[grid > fold_mu]
+unstable_mu = stable_mu[stable_mu < result.interval("mu0").median]
+fb = [sf.frequency_band(stable_mu, "stable"), sf.frequency_band(unstable_mu, "unstable")]
+pb = [sf.frequency_band(stable_mu, "stable", predictive=True),
+      sf.frequency_band(unstable_mu, "unstable", predictive=True)]
+meas = [(r.mu, sf.data.measured_hz[i], r.branch) for i, r in enumerate(rs)]
+display(plot_frequency(fb, meas, predictive=pb, mu_label="airspeed", mu_units="m/s"))
+bands = sf.time_series_bands(rs.subset([0, 3, 4, 6]), n_periods=3.0)
+display(plot_time_series(bands, mu_label="airspeed", mu_units="m/s"))"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={
