@@ -548,7 +548,8 @@ def frequency_draws(spec: sp.SpeedSpec, map_spec: ModelSpec, samples: dict, map_
     out = np.asarray(f(om, ms, mu))
     if predictive:
         tau = np.asarray(samples.get("tau_f", np.zeros(out.shape[0])), dtype=float)
-        eps = np.random.default_rng(seed).standard_normal(out.shape)
+        # one new recording per draw, the same along μ (smooth band edges)
+        eps = np.random.default_rng(seed).standard_normal((out.shape[0], 1))
         out = out * (1.0 + tau[:, None] * eps)
     return out
 
