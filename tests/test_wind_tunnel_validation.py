@@ -40,7 +40,7 @@ def loo(recordings):
 
 @pytest.mark.slow
 def test_bayesian_bands_cover_held_out_recordings_better_than_point_fits(loo):
-    """Measured: Bayesian 5/7, MAP plug-in 4/7, maximum likelihood plug-in 2/7.
+    """Measured: Bayesian 5/7, MAP plug-in 4/7, maximum likelihood plug-in 1/7 (2/7 before).
 
     The two Bayesian misses are extrapolations at the data's edges (the
     largest stable μ, and the unstable LCO nearest the Hopf point).
