@@ -26,11 +26,11 @@ import argparse
 import json
 import os
 import platform
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from bench_calibration import _atomic_write  # benchmarks/ is on the path as a script
 
 REPO = Path(__file__).resolve().parent.parent
 CBC_DIR = (REPO / ".." / "shared" / "data" / "flutter_cbc").resolve()
@@ -142,13 +142,6 @@ def markdown(results: list[dict], meta: dict) -> str:
                   for p in res["phase"]]
         lines.append("")
     return "\n".join(lines)
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
 
 
 def main(argv=None) -> int:
