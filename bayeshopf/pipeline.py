@@ -22,9 +22,10 @@ from bayeshopf.diagnostics.predictive import amplitude_draws, predictive_amplitu
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import FitError
 from bayeshopf.features.orbits import DEFAULT_N_HARMONICS, OrbitFeatures, extract_features
-from bayeshopf.inference.cache import enable_compilation_cache
+from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
 from bayeshopf.inference.init import build_spec, initial_values
 from bayeshopf.inference.map import fit_map
+from bayeshopf.inference.multistart import mix, pointwise_log_likelihood, stacking_weights
 from bayeshopf.inference.results import MapResult, SviResult
 from bayeshopf.inference.svi import fit_svi
 from bayeshopf.model import normal_form
@@ -43,7 +44,11 @@ class FitSettings:
         svi_steps: SVI iterations from the MAP point.
         num_particles: ELBO particles per SVI step.
         n_draws: Posterior draws kept.
-        guide: Autoguide, ``"mvn"`` (full-rank) or ``"lowrank"``.
+        guide: Autoguide, ``"lowrank"`` (low-rank plus diagonal) or ``"mvn"``
+            (full-rank).
+        n_starts: MAP starts (different initial MLP weights); SVI runs from
+            each and the posteriors are combined by stacking
+            (:mod:`bayeshopf.inference.multistart`).
         nn_width: Neurons per hidden layer of the map's MLP.
         nn_depth: Hidden layers of the map's MLP.
     """
@@ -54,14 +59,38 @@ class FitSettings:
     svi_steps: int = 1500
     num_particles: int = 2
     n_draws: int = 1000
-    guide: str = "mvn"
+    guide: str = "lowrank"
+    n_starts: int = 4
     nn_width: int = 10
     nn_depth: int = 2
 
     @classmethod
     def fast(cls) -> FitSettings:
         """Short runs for CI and smoke tests (intervals less converged)."""
-        return cls(adam_steps=500, lbfgs_steps=150, svi_steps=600, n_draws=400)
+        return cls(adam_steps=500, lbfgs_steps=150, svi_steps=600, n_draws=400, n_starts=1)
+
+
+@dataclass(frozen=True)
+class StartSummary:
+    """One start of a multi-start fit (immutable).
+
+    Attributes:
+        map_loss: Negative log joint at the start's MAP point.
+        weight: Its stacking weight in the posterior.
+        elpd: Its in-sample log pointwise predictive density, ``Σ_i log E_q p(Φ(R_i) | θ)``.
+        map_values: MAP values of ``mu0``, ``a2`` and (subcritical) ``mu_fold``.
+    """
+
+    map_loss: float
+    weight: float
+    elpd: float
+    map_values: dict
+
+
+def _lpd(log_lik: np.ndarray) -> np.ndarray:
+    """``log E_s p(y_i | θ_s)`` per observation, from ``(n_draws, n_obs)`` log-likelihoods."""
+    m = np.max(log_lik, axis=0)
+    return m + np.log(np.mean(np.exp(log_lik - m), axis=0))
 
 
 @dataclass(frozen=True)
@@ -79,6 +108,7 @@ class HopfFit:
         mu_units: Unit of μ.
         amplitude_units: Unit of the amplitude (that of z1).
         timings: Seconds per stage.
+        starts: One :class:`StartSummary` per MAP start that converged.
     """
 
     spec: ModelSpec
@@ -91,6 +121,7 @@ class HopfFit:
     mu_units: str
     amplitude_units: str
     timings: dict = field(default_factory=dict, compare=False)
+    starts: tuple = ()
 
     @property
     def samples(self) -> dict:
@@ -241,8 +272,11 @@ def fit(
     """Fit the Bayesian hybrid normal-form model to LCO recordings.
 
     Stages: Fourier features of every recording; MAP by Adam then L-BFGS from
-    data-driven starting values; SVI with a multivariate-normal autoguide
-    started at the MAP point; ``settings.n_draws`` posterior draws.
+    data-driven starting values of the normal form and ``settings.n_starts``
+    random initial MLP weights; from each MAP point, SVI with a low-rank
+    multivariate-normal autoguide; the approximations combined by stacking
+    (:mod:`bayeshopf.inference.multistart`) into ``settings.n_draws``
+    posterior draws. ``map`` is the start with the lowest negative log joint.
 
     Args:
         recordings: The recordings, or features already extracted from them.
@@ -261,6 +295,7 @@ def fit(
     settings = settings or FitSettings()
     if compilation_cache:
         enable_compilation_cache()
+    release_compiled()
     timings = {}
     t0 = time.perf_counter()
     prep = _prepare(recordings, criticality, settings, single_branch)
@@ -268,25 +303,50 @@ def fit(
     timings["features"] = time.perf_counter() - t0
 
     k_map, k_svi = jax.random.split(jax.random.PRNGKey(seed))
+    init = initial_values(features, spec)
+    maps, svis = [], []
+    timings["map"] = timings["svi"] = 0.0
+    for j in range(settings.n_starts):
+        t0 = time.perf_counter()
+        # start 0 keeps the single-start keys, so n_starts=1 is the plain fit
+        key_j = (k_map, k_svi) if j == 0 else (
+            jax.random.fold_in(k_map, j), jax.random.fold_in(k_svi, j))
+        m = fit_map(
+            hopf_model, kwargs, init, key=key_j[0],
+            adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
+        )
+        timings["map"] += time.perf_counter() - t0
+        if not np.isfinite(m.losses[-1]):
+            continue
+        t0 = time.perf_counter()
+        svis.append(fit_svi(
+            hopf_model, kwargs, m, key=key_j[1], steps=settings.svi_steps,
+            num_particles=settings.num_particles, guide=settings.guide,
+            n_draws=settings.n_draws, progress=progress,
+        ))
+        maps.append(m)
+        timings["svi"] += time.perf_counter() - t0
+    if not maps:
+        raise FitError(
+            f"MAP did not converge: the loss is not finite from any of {settings.n_starts} starts"
+        )
     t0 = time.perf_counter()
-    map_result = fit_map(
-        hopf_model, kwargs, initial_values(features, spec), key=k_map,
-        adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
+    log_liks = [pointwise_log_likelihood(hopf_model, kwargs, r.samples) for r in svis]
+    weights = stacking_weights(log_liks)
+    svi_result = mix(svis, weights, jax.random.fold_in(k_svi, settings.n_starts))
+    map_result = maps[int(np.argmin([m.losses[-1] for m in maps]))]
+    starts = tuple(
+        StartSummary(map_loss=float(m.losses[-1]), weight=float(w),
+                     elpd=float(np.sum(_lpd(ll))),
+                     map_values={k: float(m.params[k]) for k in ("mu0", "a2", "mu_fold")
+                                 if k in m.params})
+        for m, w, ll in zip(maps, weights, log_liks, strict=True)
     )
-    if not np.isfinite(map_result.losses[-1]):
-        raise FitError("MAP did not converge: the loss is not finite")
-    timings["map"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    svi_result = fit_svi(
-        hopf_model, kwargs, map_result, key=k_svi, steps=settings.svi_steps,
-        num_particles=settings.num_particles, guide=settings.guide,
-        n_draws=settings.n_draws, progress=progress,
-    )
-    timings["svi"] = time.perf_counter() - t0
+    timings["stacking"] = time.perf_counter() - t0
     return HopfFit(
         spec=spec, features=features, map=map_result, svi=svi_result, settings=settings,
         seed=seed, mu_label=prep.mu_label, mu_units=prep.mu_units,
-        amplitude_units=prep.amplitude_units, timings=timings,
+        amplitude_units=prep.amplitude_units, timings=timings, starts=starts,
     )
 
 
@@ -321,6 +381,7 @@ def fit_point(
     settings = settings or FitSettings()
     if compilation_cache:
         enable_compilation_cache()
+    release_compiled()
     t0 = time.perf_counter()
     prep = _prepare(recordings, criticality, settings)
     k_map, _ = jax.random.split(jax.random.PRNGKey(seed))

@@ -86,6 +86,12 @@ def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
         },
         "map": {k: _finite_or_none(float(np.asarray(fit.map.params[k])))
                 for k in ("mu0", "a2", "mu_fold") if k in fit.map.params},
+        "starts": [
+            {"map_loss": _finite_or_none(st.map_loss), "stacking_weight": st.weight,
+             "elpd_in_sample": _finite_or_none(st.elpd),
+             "map": {k: _finite_or_none(v) for k, v in st.map_values.items()}}
+            for st in fit.starts
+        ],
         "seed": fit.seed,
         "settings": dict(fit.settings.__dict__),
         "n_draws": int(np.shape(fit.samples["mu0"])[0]),

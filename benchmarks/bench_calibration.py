@@ -83,7 +83,9 @@ def run_seed(seed: int, fast: bool) -> dict:
     fit_s = time.perf_counter() - t0
     true = truth.values()
     rec = {"seed": seed, "fit_s": fit_s, "timings": dict(result.timings),
-           "offsets": truth.offsets}
+           "offsets": truth.offsets,
+           "starts": [{"map_loss": s.map_loss, "weight": s.weight, "elpd": s.elpd,
+                       **s.map_values} for s in result.starts]}
     for q in QUANTITIES:
         iv = result.interval(q)
         rec[q] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi, "true": true[q],

@@ -85,3 +85,16 @@ def test_supercritical_refuses_unstable_recordings(planted):
     rs, _ = planted
     with pytest.raises(FitError, match="unstable"):
         fit(rs, "supercritical", settings=FitSettings.fast(), progress=False)
+
+
+def test_every_start_is_recorded_and_stacked(result):
+    """Default fits run several MAP starts; the posterior is their stacked mixture."""
+    starts = result.starts
+    assert len(starts) == result.settings.n_starts > 1
+    w = np.array([s.weight for s in starts])
+    assert np.all(w >= 0) and np.isclose(w.sum(), 1.0)
+    # the reported MAP is the start with the lowest negative log joint
+    assert float(result.map.losses[-1]) == min(s.map_loss for s in starts)
+    assert result.samples["mu0"].shape == (result.settings.n_draws,)
+    for s in starts:
+        assert np.isfinite(s.elpd) and set(s.map_values) == {"mu0", "a2", "mu_fold"}

@@ -44,3 +44,22 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _ENABLED.append(str(target))
     return target
+
+
+def release_compiled() -> None:
+    """Drop every in-memory compiled program (bayeshopf's per-spec jits and JAX's caches).
+
+    Each fit compiles its own closures (the potential, the SVI step, the
+    predictions of its :class:`~bayeshopf.model.hybrid.ModelSpec`), and JAX
+    keeps the compiled code mapped in memory. A process that fits many data
+    sets (leave-one-out, calibration over seeds) then exhausts the kernel's
+    limit on memory mappings (``vm.max_map_count``, 65530 by default): LLVM
+    fails with "Cannot allocate memory" after about 50 fits of 4 starts.
+    :func:`~bayeshopf.pipeline.fit` calls this first; nothing compiled for an
+    earlier fit is reused by a later one, and the persistent cache on disk is
+    kept, so a repeated fit still loads its programs instead of compiling.
+    """
+    from bayeshopf.model import hybrid
+
+    hybrid.clear_spec_jits()
+    jax.clear_caches()

@@ -665,7 +665,8 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     # frequency bands of the planted set stayed too narrow (truth outside at 8 of 10 μ)
     svi_result = fit_svi(speed_model, kwargs, map_result, key=k_svi, steps=settings.svi_steps,
                          num_particles=settings.num_particles, n_draws=n_draws,
-                         progress=progress, obs_name="y", init_scale=SPEED_INIT_SCALE)
+                         progress=progress, obs_name="y", init_scale=SPEED_INIT_SCALE,
+                         guide="mvn")
     timings["svi"] = time.perf_counter() - t0
     samples = {k: v for k, v in svi_result.samples.items() if k not in ("y_rep", "f")}
     map_samples = {k: np.asarray(hopf_fit.samples[k])[:n_draws] for k in keys}

@@ -187,6 +187,11 @@ def jit_for_spec(spec: ModelSpec, kind: str, build):
     return hit[1]
 
 
+def clear_spec_jits() -> None:
+    """Forget every cached :func:`jit_for_spec` program."""
+    _SPEC_JITS.clear()
+
+
 def branch_signs(unstable) -> np.ndarray:
     """Closed-form branch signs (+1 stable, −1 unstable) from a boolean mask."""
     return np.where(np.asarray(unstable), normal_form.UNSTABLE, normal_form.STABLE)
