@@ -40,16 +40,21 @@ def loo(recordings):
 
 @pytest.mark.slow
 def test_bayesian_bands_cover_held_out_recordings_better_than_point_fits(loo):
-    """Measured (4 stacked starts): Bayesian 4/7, MAP plug-in 4/7, maximum likelihood 1/7.
+    """Single start: Bayesian 5/7, MAP plug-in 4/7, maximum likelihood plug-in 1/7.
 
-    The Bayesian misses are the two extrapolations at the data's edges (the
-    largest stable μ, and the unstable LCO nearest the Hopf point) and the
-    stable LCO at 16.5 m/s, 0.1 mm below its band's lower edge (64.2 against
-    64.3 mm); a single start had 5/7.
+    With 4 stacked starts (the present default) the Bayesian fit covers 4/7 and
+    this test fails: the stable LCO at 16.5 m/s lies 0.1 mm below its band's
+    lower edge (64.2 against 64.3 mm). The other misses are extrapolations at
+    the data's edges (the largest stable μ, and the unstable LCO nearest the
+    Hopf point).
     """
     cov = {m: loo.coverage(m) for m in loo.methods}
-    assert cov["bayes"] >= 4, cov
+    assert cov["bayes"] >= 5, cov
     assert cov["bayes"] > cov["ml"] and cov["bayes"] >= cov["map"], cov
+    # every held-out stable LCO inside the data range is covered
+    for f in loo.folds:
+        if f.branch == "stable" and f.mu < 17.3:
+            assert f.inside("bayes"), (f.name, f.predictions["bayes"], f.measured)
 
 
 @pytest.mark.slow
@@ -62,12 +67,13 @@ def test_held_out_coverage_reaches_six_of_seven(loo):
 def test_fold_moves_less_across_folds_than_with_maximum_likelihood(loo):
     s = loo.summary()
     assert s["bayes"]["mu_fold_sd"] < s["ml"]["mu_fold_sd"], s
-    # the Bayesian fold interval of most folds contains the paper's estimate
+    # the Bayesian fold interval of every fold contains the paper's estimate
     inside = [f.predictions["bayes"].mu_fold[1] <= PAPER_FOLD <= f.predictions["bayes"].mu_fold[2]
               for f in loo.folds]
-    # measured 5/7: without the lowest-μ stable or the highest unstable recording
-    # the fold moves to 14.5 m/s and its interval ends below 14.66
-    assert sum(inside) >= 5, [f.predictions["bayes"].mu_fold for f in loo.folds]
+    # measured 5/7, before and after the stacked starts (this test fails): without
+    # the lowest-μ stable or the highest unstable recording the fold moves to
+    # 14.5 m/s and its interval ends below 14.66
+    assert sum(inside) >= 6, [f.predictions["bayes"].mu_fold for f in loo.folds]
 
 
 @pytest.mark.slow
