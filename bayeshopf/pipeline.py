@@ -14,9 +14,11 @@ from dataclasses import dataclass, field, replace
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.special import logsumexp
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, bifurcation_diagram
+from bayeshopf.diagnostics.comparison import pointwise_log_likelihood
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck, posterior_predictive_check
 from bayeshopf.diagnostics.predictive import amplitude_draws, predictive_amplitude_draws
 from bayeshopf.diagnostics.summaries import Interval, interval
@@ -25,7 +27,7 @@ from bayeshopf.features.orbits import DEFAULT_N_HARMONICS, OrbitFeatures, extrac
 from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
 from bayeshopf.inference.init import build_spec, initial_values
 from bayeshopf.inference.map import fit_map
-from bayeshopf.inference.multistart import mix, pointwise_log_likelihood, stacking_weights
+from bayeshopf.inference.multistart import mix, stacking_weights
 from bayeshopf.inference.results import MapResult, SviResult
 from bayeshopf.inference.svi import fit_svi
 from bayeshopf.model import normal_form
@@ -77,20 +79,15 @@ class StartSummary:
     Attributes:
         map_loss: Negative log joint at the start's MAP point.
         weight: Its stacking weight in the posterior.
-        elpd: Its in-sample log pointwise predictive density, ``Σ_i log E_q p(Φ(R_i) | θ)``.
+        lpd: Its in-sample log pointwise predictive density,
+            ``Σ_i log E_q p(Φ(R_i) | θ)``.
         map_values: MAP values of ``mu0``, ``a2`` and (subcritical) ``mu_fold``.
     """
 
     map_loss: float
     weight: float
-    elpd: float
+    lpd: float
     map_values: dict
-
-
-def _lpd(log_lik: np.ndarray) -> np.ndarray:
-    """``log E_s p(y_i | θ_s)`` per observation, from ``(n_draws, n_obs)`` log-likelihoods."""
-    m = np.max(log_lik, axis=0)
-    return m + np.log(np.mean(np.exp(log_lik - m), axis=0))
 
 
 @dataclass(frozen=True)
@@ -331,13 +328,13 @@ def fit(
             f"MAP did not converge: the loss is not finite from any of {settings.n_starts} starts"
         )
     t0 = time.perf_counter()
-    log_liks = [pointwise_log_likelihood(hopf_model, kwargs, r.samples) for r in svis]
+    log_liks = [pointwise_log_likelihood(r.samples, features) for r in svis]
     weights = stacking_weights(log_liks)
     svi_result = mix(svis, weights, jax.random.fold_in(k_svi, settings.n_starts))
     map_result = maps[int(np.argmin([m.losses[-1] for m in maps]))]
     starts = tuple(
         StartSummary(map_loss=float(m.losses[-1]), weight=float(w),
-                     elpd=float(np.sum(_lpd(ll))),
+                     lpd=float(np.sum(logsumexp(ll, axis=0) - np.log(ll.shape[0]))),
                      map_values={k: float(m.params[k]) for k in ("mu0", "a2", "mu_fold")
                                  if k in m.params})
         for m, w, ll in zip(maps, weights, log_liks, strict=True)

@@ -88,7 +88,7 @@ def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
                 for k in ("mu0", "a2", "mu_fold") if k in fit.map.params},
         "starts": [
             {"map_loss": _finite_or_none(st.map_loss), "stacking_weight": st.weight,
-             "elpd_in_sample": _finite_or_none(st.elpd),
+             "lpd_in_sample": _finite_or_none(st.lpd),
              "map": {k: _finite_or_none(v) for k, v in st.map_values.items()}}
             for st in fit.starts
         ],

@@ -84,7 +84,7 @@ def run_seed(seed: int, fast: bool) -> dict:
     true = truth.values()
     rec = {"seed": seed, "fit_s": fit_s, "timings": dict(result.timings),
            "offsets": truth.offsets,
-           "starts": [{"map_loss": s.map_loss, "weight": s.weight, "elpd": s.elpd,
+           "starts": [{"map_loss": s.map_loss, "weight": s.weight, "lpd": s.lpd,
                        **s.map_values} for s in result.starts]}
     for q in QUANTITIES:
         iv = result.interval(q)

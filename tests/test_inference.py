@@ -97,4 +97,4 @@ def test_every_start_is_recorded_and_stacked(result):
     assert float(result.map.losses[-1]) == min(s.map_loss for s in starts)
     assert result.samples["mu0"].shape == (result.settings.n_draws,)
     for s in starts:
-        assert np.isfinite(s.elpd) and set(s.map_values) == {"mu0", "a2", "mu_fold"}
+        assert np.isfinite(s.lpd) and set(s.map_values) == {"mu0", "a2", "mu_fold"}

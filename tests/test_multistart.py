@@ -1,18 +1,14 @@
 """Multi-start combination: draw counts, stacking weights, the mixture, the log-likelihood."""
 
+from types import SimpleNamespace
+
 import jax
 import numpy as np
-import numpyro
-import numpyro.distributions as dist
 import pytest
 from scipy.stats import norm
 
-from bayeshopf.inference.multistart import (
-    draw_counts,
-    mix,
-    pointwise_log_likelihood,
-    stacking_weights,
-)
+from bayeshopf.diagnostics.comparison import pointwise_log_likelihood
+from bayeshopf.inference.multistart import draw_counts, mix, stacking_weights
 from bayeshopf.inference.results import SviResult
 
 
@@ -51,15 +47,19 @@ def test_mixture_draws_follow_the_weights_and_are_shuffled():
     assert float(out.guide_params["v"]) == 1.0  # guide of the heaviest component
 
 
-def test_pointwise_log_likelihood_matches_scipy():
-    def model(y=None):
-        m = numpyro.sample("m", dist.Normal(0.0, 1.0))
-        s = numpyro.sample("s", dist.HalfNormal(1.0))
-        with numpyro.plate("obs", 3):
-            numpyro.sample("y", dist.Normal(m, s), obs=y)
-
-    y = np.array([0.1, -0.4, 1.2])
-    samples = {"m": np.array([0.0, 0.5]), "s": np.array([1.0, 0.3])}
-    ll = pointwise_log_likelihood(model, {"y": y}, samples, obs_name="y")
-    ref = norm.logpdf(y[None], loc=samples["m"][:, None], scale=samples["s"][:, None])
+def test_pointwise_log_likelihood_of_the_hybrid_model_matches_scipy():
+    """The log-likelihoods stacking uses: one per draw and recording, summed over coefficients."""
+    rng = np.random.default_rng(1)
+    n_draws, n_rec, n_h = 3, 4, 2
+    n_c = 2 * n_h + 1
+    feats = SimpleNamespace(coeffs=rng.normal(size=(n_rec, n_c)),
+                            coeffs_sd=rng.uniform(0.01, 0.1, size=(n_rec, n_c)))
+    samples = {"coeffs_hat": rng.normal(size=(n_draws, n_rec, n_c)),
+               "sigma": rng.uniform(0.1, 0.5, size=(n_draws, n_h + 1))}
+    ll = pointwise_log_likelihood(samples, feats)
+    # per coefficient [σ0, σ1, σ2, σ1, σ2] (cos kθ and sin kθ share σ_k)
+    per = samples["sigma"][:, [0, 1, 2, 1, 2]]
+    scale = np.sqrt(per[:, None, :] ** 2 + feats.coeffs_sd[None] ** 2)
+    ref = norm.logpdf(feats.coeffs[None], loc=samples["coeffs_hat"], scale=scale).sum(-1)
+    assert ll.shape == (n_draws, n_rec)
     np.testing.assert_allclose(ll, ref, rtol=1e-12)

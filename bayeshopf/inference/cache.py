@@ -54,7 +54,8 @@ def release_compiled() -> None:
     keeps the compiled code mapped in memory. A process that fits many data
     sets (leave-one-out, calibration over seeds) then exhausts the kernel's
     limit on memory mappings (``vm.max_map_count``, 65530 by default): LLVM
-    fails with "Cannot allocate memory" after about 50 fits of 4 starts.
+    fails with "Cannot allocate memory" (the 3-DOF calibration crashed at its
+    14th fit of 4 starts, with 23 GB of memory free).
     :func:`~bayeshopf.pipeline.fit` calls this first; nothing compiled for an
     earlier fit is reused by a later one, and the persistent cache on disk is
     kept, so a repeated fit still loads its programs instead of compiling.

@@ -20,7 +20,9 @@ maximise the leave-one-recording-out predictive density of the mixture,
         \Phi(R_{-i}), q_j),
 
 with each :math:`p(\Phi(R_i) \mid \Phi(R_{-i}), q_j)` estimated by PSIS-LOO
-(ArviZ ``compare``, through :mod:`bayeshopf.diagnostics.arviz_io`). A start
+(ArviZ ``compare``, through :mod:`bayeshopf.diagnostics.arviz_io`) from the
+pointwise log-likelihoods of
+:func:`bayeshopf.diagnostics.comparison.pointwise_log_likelihood`. A start
 stuck in a poor optimum gets weight near zero; modes that predict equally well
 share the weight, and the spread between them enters the intervals.
 """
@@ -29,21 +31,9 @@ from __future__ import annotations
 
 import jax
 import numpy as np
-from numpyro.infer import log_likelihood
 
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.inference.results import SviResult
-
-
-def pointwise_log_likelihood(model, model_kwargs: dict, samples: dict,
-                             obs_name: str = "coeffs") -> np.ndarray:
-    """``log p(y_i | θ_s)`` per draw ``s`` and observation ``i``: ``(n_draws, n_obs)``.
-
-    NumPyro's ``log_likelihood`` of the observed site, with its event dimensions
-    summed (one value per recording for the hybrid model).
-    """
-    ll = log_likelihood(model, samples, **model_kwargs)[obs_name]
-    return np.asarray(ll).reshape(ll.shape[0], -1)
 
 
 def stacking_weights(log_liks: list[np.ndarray]) -> np.ndarray:
