@@ -131,11 +131,18 @@ class HopfFit:
         return self.spec.criticality
 
     def interval(self, name: str) -> Interval | None:
-        """Median and 90% interval of ``mu0``, ``a2`` or ``mu_fold`` (None if absent)."""
+        """Median and 90% interval of ``mu0``, ``a2``, ``a4`` or ``mu_fold`` (None if absent).
+
+        ``a4`` is a free site only in the supercritical gauge (``a2 = −1``,
+        :mod:`~bayeshopf.model.normal_form`); ``mu_fold`` only in the
+        subcritical one.
+        """
         if name == "mu_fold":
             if self.criticality != "subcritical":
                 return None
             return interval(normal_form.fold_point(self.samples["mu0"], self.samples["a2"]))
+        if name not in self.samples:
+            return None
         return interval(self.samples[name])
 
     def amplitude(self, mu, branch: str = "stable", predictive: bool = False) -> np.ndarray:

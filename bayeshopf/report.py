@@ -70,6 +70,8 @@ def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
     out = {
         "mu0": fit.interval("mu0").to_json(),
         "a2": fit.interval("a2").to_json(),
+        # the supercritical gauge fixes a2 = -1 and frees the quintic a4 = -κ
+        "a4": None if fit.interval("a4") is None else fit.interval("a4").to_json(),
         "mu_fold": None if fold is None else fold.to_json(),
         "criticality": fit.criticality,
         "mu_label": fit.mu_label,
@@ -85,7 +87,7 @@ def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
             "coefficients_inside_ci90": ppc.coeff_coverage,
         },
         "map": {k: _finite_or_none(float(np.asarray(fit.map.params[k])))
-                for k in ("mu0", "a2", "mu_fold") if k in fit.map.params},
+                for k in ("mu0", "a2", "a4", "mu_fold") if k in fit.map.params},
         "starts": [
             {"map_loss": _finite_or_none(st.map_loss), "stacking_weight": st.weight,
              "lpd_in_sample": _finite_or_none(st.lpd),

@@ -98,3 +98,22 @@ def test_every_start_is_recorded_and_stacked(result):
     assert result.samples["mu0"].shape == (result.settings.n_draws,)
     for s in starts:
         assert np.isfinite(s.lpd) and set(s.map_values) == {"mu0", "a2", "mu_fold"}
+
+
+def test_supercritical_gauge_recovers_planted_quintic_system():
+    """Data from the quintic gauge (a2 = −3.4, a4 = −1) fitted in the gauge a2 = −1, a4 = −κ.
+
+    The two are the same family with κ = 1/a2² (and r scaled by √|a2|, which
+    the map absorbs), so the fit must find μ0 and κ = 1/3.4² = 0.0865.
+    """
+    from bayeshopf.data.synthetic import hopf_recordings
+
+    rs = hopf_recordings(criticality="supercritical", mu0=18.0, a2=-3.4,
+                         stable_mu=(18.3, 18.8, 19.5, 20.3, 21.2, 22.0), seed=3, nonlinear=0.0)
+    res = fit(rs, "supercritical", seed=0, settings=FitSettings.fast(), progress=False)
+    assert res.interval("mu_fold") is None
+    a2 = res.interval("a2")
+    assert a2.lo == a2.hi == -1.0
+    mu0, a4 = res.interval("mu0"), res.interval("a4")
+    assert mu0.contains(18.0) and mu0.width < 0.3, mu0
+    assert a4.contains(-1 / 3.4**2) and a4.hi < 0, a4

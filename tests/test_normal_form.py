@@ -146,3 +146,46 @@ def test_gradients_finite_where_branch_exists() -> None:
     r = float(lco_radius(16.0, 18.0, 3.4, UNSTABLE))
     disc = 3.4**2 + 4 * (16.0 - 18.0)
     assert float(g[0]) == pytest.approx(1.0 / (2 * r * np.sqrt(disc)), rel=1e-10)
+
+
+# ------------------------------------------------- the supercritical gauge: a2 = −1, a4 = −κ
+
+
+@pytest.mark.parametrize("kappa", [0.0, 0.05, 1.0, 20.0])
+def test_supercritical_gauge_radius(kappa: float) -> None:
+    """r² = 2(μ−μ0)/(1 + √(1 + 4κ(μ−μ0))): a zero of ṙ = Δ r − r³ − κ r⁵, none below μ0."""
+    mu = np.linspace(MU0 - 1.0, MU0 + 3.0, 401)
+    r = np.asarray(lco_radius(mu, MU0, -1.0, STABLE, -kappa))
+    d = mu - MU0
+    above = d > 0
+    assert np.all(np.isnan(r[~above])) and np.all(np.isfinite(r[above]))
+    expected = np.sqrt(2 * d[above] / (1 + np.sqrt(1 + 4 * kappa * d[above])))
+    np.testing.assert_allclose(r[above], expected, rtol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(radial_field(r[above], mu[above], MU0, -1.0, -kappa)), 0.0, atol=1e-12
+    )
+    assert np.all(np.isnan(np.asarray(lco_radius(mu, MU0, -1.0, UNSTABLE, -kappa))))
+    if kappa == 0.0:  # the square-root law of a generic supercritical Hopf point
+        np.testing.assert_allclose(r[above] ** 2, d[above], rtol=1e-12)
+
+
+@pytest.mark.parametrize("a2", [-0.7, -3.4])
+def test_supercritical_gauges_are_the_same_family(a2: float) -> None:
+    """Quintic gauge (a2 < 0, a4 = −1) = supercritical gauge (−1, −1/a2²) with r scaled by √|a2|."""
+    mu = np.linspace(MU0 + 1e-3, MU0 + 4.0, 101)
+    r_quintic = np.asarray(lco_radius(mu, MU0, a2, STABLE))
+    r_gauge = np.asarray(lco_radius(mu, MU0, -1.0, STABLE, -1.0 / a2**2))
+    np.testing.assert_allclose(r_gauge, np.sqrt(abs(a2)) * r_quintic, rtol=1e-12)
+
+
+@pytest.mark.parametrize("offset", [-0.3, 0.3])
+def test_supercritical_gauge_radius_attracts(offset: float) -> None:
+    """solve_ivp of ṙ = Δ r − r³ − κ r⁵ from ±30 % ends on the closed-form radius."""
+    mu, kappa = MU0 + 0.8, 0.4
+    r_s = float(lco_radius(mu, MU0, -1.0, STABLE, -kappa))
+    sol = solve_ivp(lambda t, y: [float(radial_field(y[0], mu, MU0, -1.0, -kappa))],
+                    (0.0, 80.0), [r_s * (1 + offset)], rtol=1e-10, atol=1e-12)
+    assert sol.success and sol.y[0, -1] == pytest.approx(r_s, rel=1e-6)
+    # and the gradient in κ is finite at κ = 0 (the prior's mode)
+    g = jax.grad(lambda k: lco_radius(mu, MU0, -1.0, STABLE, -k))(0.0)
+    assert np.isfinite(float(g)) and float(g) < 0

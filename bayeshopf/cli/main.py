@@ -97,12 +97,15 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
         print(textwrap.fill(evidence["statement"], 88))
     hdr = f"{'':8s} {'median':>10s} {'90% interval':>24s}" + (f" {'true':>10s}" if truth else "")
     print(hdr)
-    for k in ("mu0", "a2", "mu_fold"):
+    for k in ("mu0", "a2", "a4", "mu_fold"):
         v = summary.get(k)
         if v is None:
             continue
+        if k == "a2" and summary.get("a4") is not None:
+            print(f"{k:8s} {v['median']:10.4g}   (fixed by the supercritical gauge; a4 is free)")
+            continue
         t = "" if not truth or truth.get(k) is None else f" {truth[k]:10.4g}"
-        unit = "" if k == "a2" else f" {u}"
+        unit = "" if k in ("a2", "a4") else f" {u}"
         print(f"{k:8s} {v['median']:10.4g} [{v['ci90'][0]:10.4g}, {v['ci90'][1]:10.4g}]{t}{unit}")
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "

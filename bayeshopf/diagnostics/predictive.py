@@ -19,8 +19,7 @@ from bayeshopf.model.probabilistic import harmonic_scatter
 
 
 def _site_arrays(samples: dict, spec: ModelSpec) -> dict:
-    keys = ["mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_s", "nn_scale"]
-    keys += [f"nn_{w}{i}" for i in range(len(spec.nn_shapes)) for w in ("W", "b")]
+    keys = hybrid.param_site_names(spec)
     missing = [k for k in keys if k not in samples]
     if missing:
         raise KeyError(f"posterior draws lack the site(s) {', '.join(missing)}")

@@ -1,8 +1,9 @@
 """Data-driven starting point and prior constants (no hand-tuned magic numbers).
 
 The closed-form LCO radius explains how the orbit size grows with μ; fitting
-``a0_i ≈ κ r(μ_i)`` (a0: the mean of the measured R(θ) in the frame) over the
-gaps to μ0 and the fold gives starting values for μ0, a2 and the scale of T_L.
+``a0_i ≈ g r(μ_i)`` (a0: the mean of the measured R(θ) in the frame) over the
+gaps to μ0 and the fold (supercritical: the gap to μ0 and the quintic κ) gives
+starting values for the normal form and for the gain g of T_L.
 The orbit centres, regressed on μ̃, give T_s and the μ column of T_L.
 """
 
@@ -67,15 +68,16 @@ def build_spec(
     )
 
 
-def _normal_form_from_gaps(spec: ModelSpec, x: np.ndarray) -> tuple[float, float]:
+def _normal_form_from_gaps(spec: ModelSpec, x: np.ndarray) -> tuple[float, float, float]:
+    """``(μ0, a2, a4)`` from the log gaps (and, supercritical, log κ) in ``x[:2]``."""
     if spec.criticality == "subcritical":
         g_fold, g_hopf = np.exp(x[:2])
         mu_fold = spec.mu_min - g_fold
         anchor = mu_fold if spec.mu_unstable_max is None else max(mu_fold, spec.mu_unstable_max)
         mu0 = anchor + g_hopf
-        return mu0, 2.0 * np.sqrt(mu0 - mu_fold)
-    g_hopf, a2_abs = np.exp(x[:2])
-    return spec.mu_min - g_hopf, -a2_abs
+        return mu0, 2.0 * np.sqrt(mu0 - mu_fold), -1.0
+    g_hopf, kappa = np.exp(x[:2])
+    return spec.mu_min - g_hopf, -1.0, -kappa
 
 
 def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
@@ -85,16 +87,16 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
     span = spec.mu_span
 
     def resid(x):
-        mu0, a2 = _normal_form_from_gaps(spec, x)
-        r = np.asarray(normal_form.lco_radius(features.mu, mu0, a2, sign))
+        mu0, a2, a4 = _normal_form_from_gaps(spec, x)
+        r = np.asarray(normal_form.lco_radius(features.mu, mu0, a2, sign, a4))
         return np.log(a0) - x[2] - np.log(r)
 
     best = None
     for g1, g2 in itertools.product([0.03, 0.1, 0.3, 1.0], repeat=2):
-        scale2 = 2.0 * np.sqrt(span) if spec.criticality == "supercritical" else span
+        scale2 = 1.0 / span if spec.criticality == "supercritical" else span
         x0 = np.array([np.log(g1 * span), np.log(g2 * scale2), 0.0])
-        nf = _normal_form_from_gaps(spec, x0)
-        r0 = np.asarray(normal_form.lco_radius(features.mu, *nf, sign))
+        mu0, a2, a4 = _normal_form_from_gaps(spec, x0)
+        r0 = np.asarray(normal_form.lco_radius(features.mu, mu0, a2, sign, a4))
         x0[2] = np.mean(np.log(a0) - np.log(r0))
         with np.errstate(over="ignore", invalid="ignore"):  # trial steps may overflow
             sol = least_squares(resid, x0, method="lm")
@@ -105,18 +107,22 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
     x = best.x.copy()
     # keep the start off the boundary: a gap of 0 puts a recording exactly at the
     # fold, where the radius has an infinite μ-derivative and the gradient is nan
-    x[:2] = np.maximum(x[:2], np.log(0.02 * span))
-    kappa = float(np.exp(x[2]))
+    # (supercritical: a κ of 0 is the square-root law, allowed but kept off
+    # the log's singularity)
+    floor = np.log(0.02 * np.array([span, span if spec.criticality == "subcritical" else 1 / span]))
+    x[:2] = np.maximum(x[:2], floor)
+    gain = float(np.exp(x[2]))
     # orbit centres in the frame, regressed on μ̃: T_s + T_L_mu μ̃
     centres = fourier.curve(features.coeffs, 256).mean(axis=1)
     X = np.stack([np.ones_like(features.mu), spec.mu_tilde(features.mu)], axis=1)
     beta, *_ = np.linalg.lstsq(X, centres, rcond=None)
     rho = spec.orbit_scale
     v = {
-        "T_L_diag": np.array([kappa, kappa]),
+        "T_L_diag": np.array([gain, gain]),
         "T_L_21": 0.0,
         "T_L_mu": beta[1],
         "T_L1": np.zeros(3),
+        "T_L2": np.zeros(3),
         "T_s": beta[0],
         "nn_scale": 0.01 * rho,
         # the closed-form fit's RMS error in a0, as a first guess of every σ_k
@@ -128,5 +134,5 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
     if spec.criticality == "subcritical":
         v["gap_fold"], v["gap_hopf"] = np.exp(x[:2])
     else:
-        v["gap_hopf"], v["a2_abs"] = np.exp(x[:2])
+        v["gap_hopf"], v["kappa"] = np.exp(x[:2])
     return {k: np.asarray(val, dtype=np.float64) for k, val in v.items()}

@@ -100,11 +100,8 @@ SPEED_INIT_SCALE = 1e-2
 #: Prior standard deviation (rad) of each initial phase about its root-find value.
 THETA0_SD = 0.2
 
-MAP_KEYS = ("mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_s", "nn_scale")
-
-
 def _map_keys(spec: ModelSpec) -> list[str]:
-    return list(MAP_KEYS) + [f"nn_{w}{i}" for i in range(len(spec.nn_shapes)) for w in "Wb"]
+    return hybrid.param_site_names(spec)
 
 
 @dataclass(frozen=True)

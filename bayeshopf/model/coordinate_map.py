@@ -11,14 +11,18 @@ written in the common planar frame (:mod:`bayeshopf.features.frame`), with
 That fixes the gauge: the normal form is invariant under rotations of
 ``(u1, u2)``, so a full 2×2 block would leave a ring of equivalent maps.
 
-One term is added to the paper's eq. (g): the 2×2 block varies linearly with μ,
-``T_u(μ̃) = L0 + μ̃ L1`` (both lower-triangular). On the wind-tunnel rig the
-ratio of heave to pitch amplitude grows by a third across the measured speeds,
-which a μ-independent linear map cannot follow; the authors' code learns a
-μ-dependent 2×2 matrix with a second network (``ann_l``), and the first-order
-term does the same with three interpretable numbers. The
-neural network is a small tanh MLP whose output is multiplied by a learnt scale,
-so its prior can shrink the correction towards zero.
+One term is added to the paper's eq. (g): the 2×2 block varies with μ to second
+order, ``T_u(μ̃) = L0 + μ̃ L1 + μ̃² L2`` (all lower-triangular). On the
+wind-tunnel rig the ratio of heave to pitch amplitude grows by a third across the
+measured speeds, which a μ-independent linear map cannot follow; the authors'
+code learns a μ-dependent 2×2 matrix with a second network (``ann_l``), and the
+Taylor terms do the same with six interpretable numbers. The second order is
+needed for the Hopf point itself: the LCOs are observed only on ``|u| = r(μ)``,
+so a gain that changes with μ trades against μ0, and a map restricted to a
+linear change biased μ0 of the Van der Pol oscillator by −0.002 (against +0.004
+with no change), whose orbits' gain in the frame grows as μ². The neural network
+is a small tanh MLP whose output is multiplied by a learnt scale, so its prior
+can shrink the correction towards zero.
 """
 
 from __future__ import annotations
@@ -70,8 +74,8 @@ def linear_map(T_L_diag, T_L_21, T_L_mu):
     return jnp.concatenate([lower_triangular(T_L_diag, T_L_21), T_L_mu[:, None]], axis=1)
 
 
-def U12(u, mu_tilde, T_L, T_L1, T_s, nn: MLPParams, nn_scale):
-    """``U12 = T_L [u1, u2, μ̃] + μ̃ L1 u + T_s + nn_scale · NN(u1, u2, μ̃)`` (eq. g).
+def U12(u, mu_tilde, T_L, T_L1, T_s, nn: MLPParams, nn_scale, T_L2=None):
+    """``U12 = T_L [u1, u2, μ̃] + (μ̃ L1 + μ̃² L2) u + T_s + nn_scale · NN(u1, u2, μ̃)`` (eq. g).
 
     Args:
         u: Normal-form points, shape ``(..., 2)``.
@@ -81,9 +85,12 @@ def U12(u, mu_tilde, T_L, T_L1, T_s, nn: MLPParams, nn_scale):
         T_s: Shift, shape ``(2,)``.
         nn: MLP weights (3 inputs, 2 outputs).
         nn_scale: Output scale of the correction.
+        T_L2: Lower-triangular μ̃²-coefficient ``L2`` of the 2×2 block, shape
+            ``(2, 2)``, or ``None`` for none.
 
     Returns:
         Points in the planar frame, shape ``(..., 2)``.
     """
     x = jnp.concatenate([u, jnp.broadcast_to(mu_tilde, u.shape[:-1])[..., None]], axis=-1)
-    return x @ T_L.T + mu_tilde * (u @ T_L1.T) + T_s + nn_scale * mlp(nn, x)
+    slope = T_L1 if T_L2 is None else T_L1 + mu_tilde * T_L2
+    return x @ T_L.T + mu_tilde * (u @ slope.T) + T_s + nn_scale * mlp(nn, x)

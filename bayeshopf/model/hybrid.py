@@ -36,8 +36,9 @@ class ModelSpec:
     """Static structure of a hybrid model and the data-derived constants of its priors.
 
     Attributes:
-        criticality: ``"subcritical"`` (a2 > 0, both branches, a fold) or
-            ``"supercritical"`` (a2 < 0, one stable branch).
+        criticality: ``"subcritical"`` (a2 > 0 and a4 = −1: both branches, a
+            fold) or ``"supercritical"`` (a2 = −1 and a4 = −κ ≤ 0: one stable
+            branch).
         frame: The common planar frame of the features.
         n_h: Harmonics of R(θ).
         mu_centre: μ_c, the centre of the training μ (NN input scaling).
@@ -101,6 +102,10 @@ class HopfParams(NamedTuple):
         T_s: Shift of the map, shape ``(2,)``.
         nn: Weights of the map's MLP correction.
         nn_scale: Output scale of the MLP.
+        a4: Quintic coefficient: ``−1`` in the subcritical gauge, ``−κ`` in the
+            supercritical one (where ``a2 = −1``; :mod:`~bayeshopf.model.normal_form`).
+        T_L2: μ̃²-coefficient of T_L's 2×2 block (lower-triangular), shape
+            ``(2, 2)``, or ``None``.
     """
 
     mu0: jax.Array
@@ -110,6 +115,16 @@ class HopfParams(NamedTuple):
     T_s: jax.Array
     nn: MLPParams
     nn_scale: jax.Array
+    a4: jax.Array | float = -1.0
+    T_L2: jax.Array | None = None
+
+
+def param_site_names(spec: ModelSpec) -> list[str]:
+    """Names of the sites :func:`params_from_sites` reads (``a4`` only when it is free)."""
+    names = ["mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_L2", "T_s", "nn_scale"]
+    if spec.criticality == "supercritical":
+        names.append("a4")
+    return names + [f"nn_{w}{i}" for i in range(len(spec.nn_shapes)) for w in ("W", "b")]
 
 
 def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
@@ -126,6 +141,8 @@ def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
         T_s=sites["T_s"],
         nn=nn,
         nn_scale=sites["nn_scale"],
+        a4=sites.get("a4", -1.0),
+        T_L2=lower_triangular(sites["T_L2"][:2], sites["T_L2"][2]) if "T_L2" in sites else None,
     )
 
 
@@ -135,10 +152,11 @@ def orbit_at(params: HopfParams, mu, sign, phi, spec: ModelSpec):
     ``w(φ) = U12(r(μ, sign) [cos φ, sin φ], μ̃)`` in the planar frame; ``nan``
     where the branch does not exist.
     """
-    r = normal_form.lco_radius(mu, params.mu0, params.a2, sign)
+    r = normal_form.lco_radius(mu, params.mu0, params.a2, sign, params.a4)
     u = r * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
     return U12(
-        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale
+        u, spec.mu_tilde(mu), params.T_L, params.T_L1, params.T_s, params.nn, params.nn_scale,
+        params.T_L2,
     )
 
 

@@ -9,13 +9,19 @@ unit circle; Δμ the spread of the training μ; ``ρ`` the median measured a0):
   ``μ_SN = μ_min − g_fold``, ``μ0 = max(μ_SN, μ_u,max) + g_hopf`` and
   ``a2 = 2√(μ0 − μ_SN)``, so a2 > 0, stable recordings satisfy μ ≥ μ_SN, and
   unstable ones satisfy μ_SN ≤ μ ≤ μ0.
-* normal form, supercritical. ``μ0 = μ_min − g_hopf`` with
-  ``g_hopf ~ HalfNormal(Δμ)``, and ``a2 = −|a2|`` with
-  ``|a2| ~ HalfNormal(2√Δμ)``.
-* map (eq. g): ``diag(T_L) ~ LogNormal(log(ρ/r̄), 1)`` with ``r̄ = (4Δμ)^{1/4}``
-  the typical normal-form radius; ``l21 ~ N(0, ρ/r̄)``; ``l13, l23 ~ N(0, ρ)``;
-  ``T_s ~ N(0, ρ)``; the μ̃-slope of the 2×2 block,
-  ``L1 = [[p1, 0], [p3, p2]]`` with ``p ~ N(0, ρ/r̄)`` (no change with μ a priori).
+* normal form, supercritical, in the gauge ``a2 = −1`` (the paper's Van der
+  Pol model) with a free quintic ``a4 = −κ``: ``μ0 = μ_min − g_hopf`` with
+  ``g_hopf ~ HalfNormal(Δμ)``, and ``κ ~ HalfNormal(1/Δμ)``. At ``κ = 0`` the
+  orbit obeys the square-root law ``r² = μ − μ0``; at ``κ = 1/Δμ`` it has bent
+  to ``r² ≈ 0.6 (μ − μ0)`` a span above μ0. (In the quintic gauge, ``a4 = −1``
+  and ``a2 < 0``, the square-root law needs ``a2 → −∞``: a prior on a2 there
+  pulled the Van der Pol μ0 off zero.)
+* map (eq. g): ``diag(T_L) ~ LogNormal(log(ρ/r̄), 1)`` with ``r̄`` the typical
+  normal-form radius, ``(4Δμ)^{1/4}`` (subcritical) or ``√Δμ`` (supercritical);
+  ``l21 ~ N(0, ρ/r̄)``; ``l13, l23 ~ N(0, ρ)``; ``T_s ~ N(0, ρ)``; the μ̃- and
+  μ̃²-coefficients of the 2×2 block, ``L_j = [[p1, 0], [p3, p2]]`` (j = 1, 2)
+  with ``p ~ N(0, ρ/r̄)`` for L1 and ``N(0, 0.1 ρ/r̄)`` for L2 (no change with
+  μ a priori; the second order a small correction to the first).
 * NN: unit-normal weights (scaled by 1/√fan_in), output scale
   ``~ HalfNormal(0.1 ρ)``: a priori the correction is a tenth of the orbit size,
   and the data must ask for more. This is what keeps the diagram from wiggling
@@ -35,6 +41,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
@@ -53,12 +60,14 @@ def _normal_form_sites(spec: ModelSpec):
         )
         mu0 = numpyro.deterministic("mu0", anchor + g_hopf)
         a2 = numpyro.deterministic("a2", 2.0 * jnp.sqrt(mu0 - mu_fold))
+        a4 = None
     else:
         g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
-        a2_abs = numpyro.sample("a2_abs", dist.HalfNormal(2.0 * jnp.sqrt(span)))
+        kappa = numpyro.sample("kappa", dist.HalfNormal(1.0 / span))
         mu0 = numpyro.deterministic("mu0", spec.mu_min - g_hopf)
-        a2 = numpyro.deterministic("a2", -a2_abs)
-    return mu0, a2
+        a2 = numpyro.deterministic("a2", -jnp.ones_like(mu0))
+        a4 = numpyro.deterministic("a4", -kappa)
+    return mu0, a2, a4
 
 
 def _batched_prediction(spec: ModelSpec):
@@ -78,13 +87,27 @@ def _batched_prediction(spec: ModelSpec):
     return hybrid.jit_for_spec(spec, "coeffs", build)
 
 
+#: Prior scale of the μ̃²-coefficient L2 of the map, as a fraction of L1's: the
+#: second-order term is a small correction to the first. With the scale of L1
+#: it bent the 3-DOF aerofoil's map near μ0 (posterior L2 up to 0.3 of that
+#: scale) and biased μ0 low (2 of the first 5 calibration seeds missed it); the
+#: Van der Pol oscillator needs about 0.05 of it.
+L2_PRIOR_FRACTION = 0.1
+
+
 def harmonic_scatter(sigma):
     """Per-coefficient scatter ``[σ_0, σ_1..σ_n_h, σ_1..σ_n_h]`` from one σ per harmonic."""
     return jnp.concatenate([sigma[..., :1], sigma[..., 1:], sigma[..., 1:]], axis=-1)
 
 
 def typical_radius(spec: ModelSpec) -> float:
-    """``r̄ = (4Δμ)^{1/4}``, the normal-form radius scale of the priors."""
+    """The normal-form radius scale of the priors.
+
+    ``r̄ = (4Δμ)^{1/4}`` in the subcritical gauge (``r⁴ ≈ μ − μ0`` away from the
+    fold) and ``r̄ = √Δμ`` in the supercritical one (``r² ≈ μ − μ0``).
+    """
+    if spec.criticality == "supercritical":
+        return float(np.sqrt(spec.mu_span))
     return float((4.0 * spec.mu_span) ** 0.25)
 
 
@@ -101,7 +124,7 @@ def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
     """
     rho = spec.orbit_scale
     t_scale = rho / typical_radius(spec)
-    mu0, a2 = _normal_form_sites(spec)
+    mu0, a2, a4 = _normal_form_sites(spec)
     # --- map U12 (eq. g) ---
     T_L_diag = numpyro.sample(
         "T_L_diag", dist.LogNormal(jnp.log(t_scale), 1.0).expand([2]).to_event(1)
@@ -109,9 +132,13 @@ def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
     T_L_21 = numpyro.sample("T_L_21", dist.Normal(0.0, t_scale))
     T_L_mu = numpyro.sample("T_L_mu", dist.Normal(0.0, rho).expand([2]).to_event(1))
     T_L1 = numpyro.sample("T_L1", dist.Normal(0.0, t_scale).expand([3]).to_event(1))
+    T_L2 = numpyro.sample("T_L2", dist.Normal(0.0, L2_PRIOR_FRACTION * t_scale)
+                          .expand([3]).to_event(1))
     T_s = numpyro.sample("T_s", dist.Normal(0.0, rho).expand([2]).to_event(1))
     sites = {"mu0": mu0, "a2": a2, "T_L_diag": T_L_diag, "T_L_21": T_L_21,
-             "T_L_mu": T_L_mu, "T_L1": T_L1, "T_s": T_s}
+             "T_L_mu": T_L_mu, "T_L1": T_L1, "T_L2": T_L2, "T_s": T_s}
+    if a4 is not None:
+        sites["a4"] = a4
     sites["nn_scale"] = numpyro.sample("nn_scale", dist.HalfNormal(0.1 * rho))
     for i, (n_in, n_out) in enumerate(spec.nn_shapes):
         sites[f"nn_W{i}"] = numpyro.sample(

@@ -135,7 +135,7 @@ def period(params: SpeedParams, r, mu_tilde, spec: SpeedSpec):
 def frequency_hz(params: SpeedParams, map_params: HopfParams, mu, sign, spec: SpeedSpec,
                  map_spec: ModelSpec):
     """Mean oscillation frequency ``f = 1/T`` (Hz) of the LCO at μ on branch ``sign``."""
-    r = normal_form.lco_radius(mu, map_params.mu0, map_params.a2, sign)
+    r = normal_form.lco_radius(mu, map_params.mu0, map_params.a2, sign, map_params.a4)
     return 1.0 / period(params, r, map_spec.mu_tilde(mu), spec)
 
 
@@ -218,6 +218,6 @@ def initial_phase(map_params: HopfParams, mu, sign, w1, map_spec: ModelSpec,
 def trajectory_in_frame(params: SpeedParams, map_params: HopfParams, mu, sign, theta0, t,
                         spec: SpeedSpec, map_spec: ModelSpec):
     """Predicted trajectory ``w(t) = U12(r[cos θ(t), sin θ(t)], μ̃)`` in the frame, ``(n_t, 2)``."""
-    r = normal_form.lco_radius(mu, map_params.mu0, map_params.a2, sign)
+    r = normal_form.lco_radius(mu, map_params.mu0, map_params.a2, sign, map_params.a4)
     theta = integrate_phase(params, r, map_spec.mu_tilde(mu), theta0, t, spec)
     return hybrid.orbit_at(map_params, mu, sign, theta, map_spec)

@@ -78,11 +78,9 @@ FLUTTER_HELD_OUT: tuple[tuple[float, str], ...] = (
 )
 #: Training plan of the Van der Pol oscillator: 10 stable LCOs, μ = 0.05 … 0.5.
 #: Beyond μ ≈ 0.5 the cycle turns relaxation-like (sharp corners at the
-#: extremes of z1) and the fitted map stays close to linear: the predicted
-#: orbits are ellipses, the shape misfit goes into the scatter σ_k and biases
-#: μ0 (−0.007 with μ up to 1, the paper's range, against −0.003 up to 0.5 and
-#: −0.0006 up to 0.3, all from the same seed). :data:`VANDERPOL_PAPER_PLAN` is
-#: the paper-like range.
+#: extremes of z1), which the map's small network follows only in part (the
+#: misfit goes into the scatter σ_k of the high harmonics).
+#: :data:`VANDERPOL_PAPER_PLAN` is the paper's range.
 VANDERPOL_PLAN: tuple[tuple[float, str], ...] = tuple(
     (round(0.05 * k, 2), "stable") for k in range(1, 11)
 )

@@ -89,18 +89,20 @@ $$\\dot z_1 = z_2, \\qquad \\dot z_2 = 2\\mu z_2 - z_1^2 z_2 - z_1 .$$
 
 The origin loses stability at μ = 0 (eigenvalues μ ± i√(1 − μ²)), a supercritical Hopf bifurcation
 with one stable limit cycle for μ > 0 whose peak-to-peak grows as $4\\sqrt{2\\mu}$ near μ = 0. Ten
-recordings at μ = 0.1, 0.2, …, 1.0 (150 s at 20 Hz, about 20 periods each) of both states, with 1 %
-noise and offsets; five more μ are held out.
+recordings at μ = 0.05, 0.10, …, 0.50 (150 s at 20 Hz, 22–24 periods each) of both states, with 1 %
+noise and offsets; five more μ, between them, are held out. The paper's plan, 0.1 … 1.0, is
+`VANDERPOL_PAPER_PLAN`: by μ = 1 the cycle is relaxation-like ($z_2$ swings twice as far as $z_1$
+and the orbit turns sharply at the extremes of $z_1$), its R(θ) converges slowly (the cell below
+measures the 8-harmonic overshoot of the peak-to-peak on noise-free recordings), and the fitted map
+follows the corners less well.
 
-**The R(θ) features at large μ.** By μ = 1 the cycle is already relaxation-like: $z_2$ swings twice
-as far as $z_1$ and the orbit turns sharply at the extremes of $z_1$. It stays star-shaped about the
-common centre (R(θ) is single-valued), but the kink makes the Fourier series of R(θ) converge slowly:
-with the default 8 harmonics the peak-to-peak of the reconstructed orbit overshoots the true one by
-0.3 % at μ = 0.5, 1 % at μ = 0.8 and 1.6 % at μ = 1 (the cell below measures it on noise-free
-recordings). The model is compared with the data through the same 8-harmonic projection, so the fit
-itself is not biased by it, but *measured* amplitudes (and the predictive band of a new recording,
-which is on the same scale) sit that much above the true peak-to-peak at the largest μ. The range
-0.1–1.0 is kept, as in the paper, and the overshoot is reported next to the held-out check."""),
+**The normal form of a supercritical point.** The paper fits this oscillator with $a_2 = -1$ and no
+fifth-order term, $\\dot r = (\\mu - \\mu_0) r - r^3$: the square-root law $r^2 = \\mu - \\mu_0$ of a
+generic supercritical Hopf point. bayeshopf keeps that gauge and frees a quintic term,
+$\\dot r = (\\mu-\\mu_0) r - r^3 - \\kappa r^5$ with $\\kappa \\ge 0$ (prior half-normal, scale
+1/Δμ), so the data can bend the law but need not. (The subcritical gauge, $a_4 = -1$ with $a_2$ free,
+reaches the square-root law only as $a_2 \\to -\\infty$; a prior there held the orbits to a bent law
+that the map made up for with a μ-dependent tilt, and the fitted orbits were tilted ellipses.)"""),
     new_code_cell("""rs_v, truth_v = vanderpol_experiment(seed=0, fast=FAST)
 clean, _ = vanderpol_experiment(seed=0, noise=0.0, fast=FAST)
 feats = extract_features(clean)
@@ -114,8 +116,9 @@ print(f"Hopf point (Jacobian): mu0 = {truth_v.mu0:.2e}; offsets {truth_v.offsets
     new_code_cell("""result_v = fit(rs_v, "supercritical", seed=0, settings=settings, progress=False)
 print("seconds per stage:", {k: round(v, 1) for k, v in result_v.timings.items()})
 interval_table(result_v, truth_v)
-a2_v = result_v.interval("a2").median
-print(f"a2 = {a2_v:.3f}: its scale is set by the learnt map (no true value)")"""),
+a4_v = result_v.interval("a4")
+print(f"a4 = {a4_v.median:.4f} [{a4_v.lo:.4f}, {a4_v.hi:.4f}]: the quintic term in the "
+      "supercritical gauge a2 = -1 (its scale is set by the learnt map; no true value)")"""),
     new_code_cell("""rows_v = held_out_check(result_v, truth_v)
 held_out_table(rows_v, "no unit")
 display(plot_diagram_vs_truth(result_v, truth_v, rows_v,
@@ -126,6 +129,15 @@ recordings the fit never saw."""),
     new_code_cell("""display(plot_phase_portraits(result_v.samples, result_v.spec, rs_v, truth=truth_v.orbit))
 display(plot_phase_portraits(result_v.samples, result_v.spec, held_out_recordings(truth_v),
                              truth=truth_v.orbit))"""),
+    new_markdown_cell("""**Why the map varies with μ to second order.** μ0 is an extrapolation from the smallest
+training μ, 0.05, to zero amplitude, and the LCOs alone do not pin it: they lie on
+$|u|^2 = \\mu - \\mu_0$ (at κ = 0), so a map whose gain changes with μ trades against a shift of μ0.
+How the map may vary with μ therefore decides μ0. In the whitened frame the mean radius of these
+orbits grows by 5.5 % more than $\\sqrt{\\mu}$ between μ = 0.05 and 0.5, roughly as μ². With a
+map that changes only linearly with μ ($T_u = L_0 + \\tilde\\mu L_1$) the MAP put μ0 at −0.002,
+without any change at +0.004, and each posterior was only 0.001 wide; the second-order term
+$\\tilde\\mu^2 L_2$ (prior as for $L_1$, `bayeshopf/model/coordinate_map.py`) lets the gain curve
+and brings μ0 back to the truth (table above)."""),
     new_markdown_cell("""## 2. The 3-DOF aeroelastic aerofoil (Section 4.2)
 
 $M\\ddot{x} + D(U)\\dot{x} + K(U)x + N(\\alpha) = 0$ for heave $h$, pitch α and an aerodynamic lag
