@@ -133,7 +133,7 @@ display(plot_phase_portraits(result_v.samples, result_v.spec, held_out_recording
 training μ, 0.05, to zero amplitude, and the LCOs alone do not pin it: they lie on
 $|u|^2 = \\mu - \\mu_0$ (at κ = 0), so a map whose gain changes with μ trades against a shift of μ0.
 How the map may vary with μ therefore decides μ0. In the whitened frame the mean radius of these
-orbits grows by 5.5 % more than $\\sqrt{\\mu}$ between μ = 0.05 and 0.5, roughly as μ². With a
+orbits, squared, grows 5.5 % faster than μ between μ = 0.05 and 0.5 (the radius 2.7 % faster than √μ), roughly as μ². With a
 map that changes only linearly with μ ($T_u = L_0 + \\tilde\\mu L_1$) the MAP put μ0 at −0.002,
 without any change at +0.004, and each posterior was only 0.001 wide; the second-order term
 $\\tilde\\mu^2 L_2$ (prior as for $L_1$, `bayeshopf/model/coordinate_map.py`) lets the gain curve
