@@ -120,3 +120,21 @@ def test_supercritical_gauge_fits_a_planted_quintic_system():
     assert abs(res.interval("mu0").median - 18.0) < 0.01, res.interval("mu0")
     assert res.interval("a4").hi < 0
     assert res.ppc().covered.all()
+
+
+def test_hold_scatter_holds_sigma_for_a_first_phase_and_then_frees_it(planted):
+    """``FitSettings(hold_scatter=True)``: σ at 1% of ρ for the first Adam phase, then free."""
+    from dataclasses import replace
+
+    from bayeshopf.inference.init import HELD_SCATTER_FRACTION
+    from bayeshopf.pipeline import fit_point
+
+    rs, truth = planted
+    settings = replace(FitSettings.fast(), hold_scatter=True)
+    pf = fit_point(rs, "subcritical", settings=settings, progress=False)
+    m = pf.map
+    assert m.n_adam == settings.adam_steps + settings.adam_steps // 2
+    assert m.losses.size == m.n_adam + settings.lbfgs_steps and np.isfinite(m.losses[-1])
+    held = HELD_SCATTER_FRACTION * pf.spec.orbit_scale
+    assert not np.allclose(m.params["sigma"], held)  # released after the first phase
+    assert abs(float(m.params["mu0"]) - truth.mu0) < 0.05
