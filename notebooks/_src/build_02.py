@@ -136,7 +136,7 @@ How the map may vary with μ therefore decides μ0. In the whitened frame the me
 orbits, squared, grows 5.5 % faster than μ between μ = 0.05 and 0.5 (the radius 2.7 % faster than √μ), roughly as μ². With a
 map that changes only linearly with μ ($T_u = L_0 + \\tilde\\mu L_1$) the MAP put μ0 at −0.002,
 without any change at +0.004, and each posterior was only 0.001 wide; the second-order term
-$\\tilde\\mu^2 L_2$ (prior as for $L_1$, `bayeshopf/model/coordinate_map.py`) lets the gain curve
+$\\tilde\\mu^2 L_2$ (prior a tenth of $L_1$'s, `bayeshopf/model/coordinate_map.py`) lets the gain curve
 and brings μ0 back to the truth (table above)."""),
     new_markdown_cell("""## 2. The 3-DOF aeroelastic aerofoil (Section 4.2)
 
