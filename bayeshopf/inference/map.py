@@ -5,9 +5,10 @@ Optionally some sites are first *held* at given values (NumPyro's
 can use this for its scatter σ (``FitSettings(hold_scatter=True)``): with σ
 free from the start, the optimiser can explain the part of the orbits that the
 map does not yet fit by a larger σ, after which the gradient on the network's
-weights is too weak to learn it. On the wind-tunnel recordings every start
-then ends at the same point, with the network switched off and a
-first-harmonic scatter σ_1 of 0.12 (a tenth of the orbit size); with σ held at
+weights is too weak to learn it. On the wind-tunnel recordings all four
+starts (four random initial network weights) then end at the same point, so the
+network adds nothing there, with a first-harmonic scatter σ_1 of 0.12 (a
+seventh of the orbit size); with σ held at
 1% of the orbit size for the first Adam phase, the negative log joint fell from
 −159 to between −228 and −264, and σ_1 to 0.004–0.016.
 """
