@@ -82,3 +82,23 @@ def test_fits_saved_without_the_second_order_term_still_load():
     moved = hybrid.params_from_sites({**sites, "T_L2": jnp.array([0.3, 0.0, 0.0])}, spec)
     assert not np.allclose(np.asarray(hybrid.orbit_in_frame(moved, 2.5, 1.0, spec)),
                            np.asarray(hybrid.orbit_in_frame(old, 2.5, 1.0, spec)))
+
+
+def test_draws_saved_without_the_later_sites_give_the_model_they_extend():
+    """Draws without ``T_L2`` (supercritical: ``a4``) predict as ``T_L2 = 0``, ``a4 = −1``.
+
+    Fits saved before those sites existed must still predict (``bayeshopf predict``).
+    """
+    from bayeshopf.diagnostics.predictive import amplitude_draws
+
+    for criticality, a2 in (("subcritical", 1.5), ("supercritical", -1.0)):
+        spec = _spec(criticality)
+        one = _sites(spec, 0.5, a2, 1.2, T_L1=jnp.array([0.1, -0.2, 0.05]))
+        old = {k: jnp.stack([v, v]) for k, v in one.items()}  # two draws, no T_L2 / a4
+        new = {**old, "T_L2": jnp.zeros((2, 3))}
+        if criticality == "supercritical":
+            new["a4"] = -jnp.ones(2)
+        assert "T_L2" not in hybrid.param_site_names(spec, old)
+        mu = np.array([1.0, 1.8])
+        np.testing.assert_allclose(amplitude_draws(old, spec, mu, 1.0),
+                                   amplitude_draws(new, spec, mu, 1.0), rtol=1e-12)

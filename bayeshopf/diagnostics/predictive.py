@@ -19,7 +19,7 @@ from bayeshopf.model.probabilistic import harmonic_scatter
 
 
 def _site_arrays(samples: dict, spec: ModelSpec) -> dict:
-    keys = hybrid.param_site_names(spec)
+    keys = hybrid.param_site_names(spec, samples)
     missing = [k for k in keys if k not in samples]
     if missing:
         raise KeyError(f"posterior draws lack the site(s) {', '.join(missing)}")

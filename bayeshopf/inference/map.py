@@ -10,7 +10,7 @@ starts (four random initial network weights) then end at the same point, so the
 network adds nothing there, with a first-harmonic scatter σ_1 of 0.12 (a
 seventh of the orbit size); with σ held at
 1% of the orbit size for the first Adam phase, the negative log joint fell from
-−159 to between −228 and −264, and σ_1 to 0.004–0.016.
+−159 to between −228 and −271, and σ_1 to 0.004–0.016.
 """
 
 from __future__ import annotations

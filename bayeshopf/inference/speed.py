@@ -100,9 +100,6 @@ SPEED_INIT_SCALE = 1e-2
 #: Prior standard deviation (rad) of each initial phase about its root-find value.
 THETA0_SD = 0.2
 
-def _map_keys(spec: ModelSpec) -> list[str]:
-    return hybrid.param_site_names(spec)
-
 
 @dataclass(frozen=True)
 class SpeedSettings:
@@ -622,7 +619,7 @@ def fit_speed(hopf_fit, recordings: RecordingSet, *, seed: int = 0,
     timings = {}
     t0 = time.perf_counter()
     mspec = hopf_fit.spec
-    keys = _map_keys(mspec)
+    keys = hybrid.param_site_names(mspec, hopf_fit.map.params)
     map_point = {k: np.asarray(hopf_fit.map.params[k]) for k in keys}
     data = prepare_speed_data(recordings, mspec, {k: jnp.asarray(v) for k, v in map_point.items()},
                               settings)

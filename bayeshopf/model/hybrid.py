@@ -119,12 +119,27 @@ class HopfParams(NamedTuple):
     T_L2: jax.Array | None = None
 
 
-def param_site_names(spec: ModelSpec) -> list[str]:
-    """Names of the sites :func:`params_from_sites` reads (``a4`` only when it is free)."""
+#: Sites added to the model after fits had been saved without them; when absent,
+#: :func:`params_from_sites` uses the model they extend (``T_L2 = None``: no μ̃²
+#: term; ``a4 = −1``: the quintic gauge of the earlier supercritical model).
+OPTIONAL_SITES = ("T_L2", "a4")
+
+
+def param_site_names(spec: ModelSpec, present=None) -> list[str]:
+    """Names of the sites :func:`params_from_sites` reads (``a4`` only when it is free).
+
+    Args:
+        spec: The model structure.
+        present: Names available (e.g. a saved fit's draws), or ``None``. When
+            given, the :data:`OPTIONAL_SITES` missing from it are left out.
+    """
     names = ["mu0", "a2", "T_L_diag", "T_L_21", "T_L_mu", "T_L1", "T_L2", "T_s", "nn_scale"]
     if spec.criticality == "supercritical":
         names.append("a4")
-    return names + [f"nn_{w}{i}" for i in range(len(spec.nn_shapes)) for w in ("W", "b")]
+    names += [f"nn_{w}{i}" for i in range(len(spec.nn_shapes)) for w in ("W", "b")]
+    if present is None:
+        return names
+    return [k for k in names if k in present or k not in OPTIONAL_SITES]
 
 
 def params_from_sites(sites: dict, spec: ModelSpec) -> HopfParams:
