@@ -12,7 +12,6 @@ import time
 from dataclasses import dataclass, field, replace
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from scipy.special import logsumexp
 
@@ -31,8 +30,8 @@ from bayeshopf.inference.multistart import mix, stacking_weights
 from bayeshopf.inference.results import MapResult, SviResult
 from bayeshopf.inference.svi import fit_svi
 from bayeshopf.model import normal_form
-from bayeshopf.model.hybrid import ModelSpec, branch_signs
-from bayeshopf.model.probabilistic import hopf_model
+from bayeshopf.model.hybrid import ModelSpec
+from bayeshopf.model.probabilistic import hopf_model, model_arguments
 
 
 @dataclass(frozen=True)
@@ -261,13 +260,7 @@ def _prepare(recordings, criticality: str, settings: FitSettings,
         features, criticality, nn_width=settings.nn_width, nn_depth=settings.nn_depth,
         mu_label=labels[0], mu_units=labels[1],
     )
-    kwargs = dict(
-        spec=spec,
-        mu=jnp.asarray(features.mu),
-        sign=jnp.asarray(branch_signs(features.unstable), dtype=float),
-        coeffs_sd=jnp.asarray(features.coeffs_sd),
-        coeffs=jnp.asarray(features.coeffs),
-    )
+    kwargs = model_arguments(spec, features)
     return _Prepared(features, spec, kwargs, *labels)
 
 

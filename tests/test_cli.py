@@ -154,7 +154,8 @@ def test_help_everywhere(capsys):
 @pytest.fixture(scope="module")
 def fitted(good_data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fit") / "out"
-    assert main(["fit", str(good_data), "--out", str(out), "--fast", "--quiet", "--seed", "1"]) == 0
+    assert main(["fit", str(good_data), "--out", str(out), "--fast", "--quiet", "--seed", "1",
+                 "--nuts-check"]) == 0
     return out
 
 
@@ -169,6 +170,9 @@ def test_fit_writes_summary_posterior_figures(fitted, good_data):
     for r in s["recordings"]:
         assert set(r) >= {"file", "mu", "branch", "amplitude", "predicted"}
         assert r["predicted"]["ci90"][0] <= r["predicted"]["median"] <= r["predicted"]["ci90"][1]
+    chk = s["nuts_check"]  # --nuts-check: 2 short chains in --fast mode
+    assert len(chk["chains"]["mu0"]) == 2 and len(chk["divergences"]) == 2
+    assert chk["mixed"] == (chk["max_rhat"] < 1.05)
     assert (fitted / "posterior.nc").stat().st_size > 1000
     pngs = sorted(p.name for p in (fitted / "figures").glob("*.png"))
     assert pngs == ["bifurcation.png", "phase_portraits.png", "ppc.png"]

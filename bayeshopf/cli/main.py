@@ -32,6 +32,9 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", action="store_true",
                    help="also fit the oscillation speed Ω to the time series (speed.npz); "
                    "'bayeshopf predict' then reports the frequency")
+    p.add_argument("--nuts-check", action="store_true",
+                   help="also run 4 NUTS chains from the MAP point and report whether they "
+                   "agree with each other and with the SVI bands (summary.json 'nuts_check')")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -119,6 +122,24 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
     print(f"\n{ppc['amplitudes_inside_ci90']}/{ppc['n_recordings']} measured amplitudes inside "
           f"their 90% predictive intervals; {100 * ppc['coefficients_inside_ci90']:.0f}% of the "
           "Fourier coefficients inside theirs.")
+    _print_nuts_check(summary)
+
+
+def _print_nuts_check(summary: dict) -> None:
+    """One line on the NUTS check, when the summary has one."""
+    chk = summary.get("nuts_check")
+    if chk is None:
+        return
+    med = [c["median"] for c in chk["chains"]["mu0"]]
+    lo, hi = summary["mu0"]["ci90"]
+    u = summary["mu_units"]
+    verdict = ("the chains agree (R̂ {r:.3f})" if chk["mixed"] else
+               "the chains did NOT mix (R̂ {r:.2f}): the posterior has several modes and the "
+               "bands above may be too narrow")
+    print(f"\nNUTS check, {len(med)} chains from the MAP: "
+          + verdict.format(r=chk["max_rhat"])
+          + f"; chain medians of mu0 {min(med):.4g}..{max(med):.4g} {u}, "
+          f"SVI 90% band [{lo:.4g}, {hi:.4g}] {u}")
 
 
 def _run_fit(rs, criticality, args, out, truth=None, extra=None):
@@ -134,6 +155,12 @@ def _run_fit(rs, criticality, args, out, truth=None, extra=None):
         extra = {**(extra or {}), "criticality_evidence": evidence}
     else:
         result = fit(rs, criticality, seed=args.seed, settings=_settings(args), progress=progress)
+    if getattr(args, "nuts_check", False):
+        from bayeshopf.inference.nuts import nuts_check
+
+        short = dict(num_chains=2, num_warmup=100, num_samples=100) if args.fast else {}
+        check = nuts_check(result, seed=args.seed, progress=progress, **short)
+        extra = {**(extra or {}), "nuts_check": check.to_json()}
     t1 = time.perf_counter()
     ppc = result.ppc()
     result = with_timings(result, predictive=time.perf_counter() - t1)

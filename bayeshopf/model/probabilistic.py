@@ -111,6 +111,22 @@ def typical_radius(spec: ModelSpec) -> float:
     return float((4.0 * spec.mu_span) ** 0.25)
 
 
+def model_arguments(spec: ModelSpec, features) -> dict:
+    """Keyword arguments of :func:`hopf_model` for the recordings in ``features``.
+
+    Args:
+        spec: Model structure and prior constants.
+        features: :class:`~bayeshopf.features.orbits.OrbitFeatures` of the recordings.
+    """
+    return dict(
+        spec=spec,
+        mu=jnp.asarray(features.mu),
+        sign=jnp.asarray(hybrid.branch_signs(features.unstable), dtype=float),
+        coeffs_sd=jnp.asarray(features.coeffs_sd),
+        coeffs=jnp.asarray(features.coeffs),
+    )
+
+
 def hopf_model(spec: ModelSpec, mu, sign, coeffs_sd, coeffs=None):
     """NumPyro model of the measured Fourier features.
 
