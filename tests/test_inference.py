@@ -146,7 +146,7 @@ def test_hold_scatter_holds_sigma_for_a_first_phase_and_then_frees_it(planted):
 
 @pytest.fixture(scope="module")
 def check(result):
-    return nuts_check(result, num_chains=2, num_warmup=150, num_samples=150, seed=0)
+    return nuts_check(result, num_chains=2, num_warmup=100, num_samples=100, seed=0)
 
 
 def test_chains_hold_the_planted_normal_form(check, planted):
@@ -170,7 +170,7 @@ def test_chains_agree_with_svi_where_the_data_identify_the_model(check, result):
 def test_report_has_rhat_per_latent_site_and_draws_per_chain(check):
     assert {"gap_fold", "gap_hopf", "sigma", "nn_scale", "nn_W0"} <= set(check.rhat)
     assert "mu0" not in check.rhat  # deterministic, not sampled
-    assert check.samples["mu0"].shape == (2, 150)
+    assert check.samples["mu0"].shape == (2, 100)
     assert len(check.divergences) == 2
     assert check.mixed == (check.max_rhat < 1.05)
     assert np.isfinite(check.max_rhat)
