@@ -5,7 +5,7 @@ For each case: the default fit (:func:`bayeshopf.pipeline.fit`, seed 0), then
 draws from the MAP point). Reports μ0 and the fold per chain and for SVI, the
 largest R̂, and, in the folds, the held-out recording's 90% predictive band per
 chain and for SVI against its measured amplitude. Writes
-``benchmarks/nuts_check.md`` and ``nuts_check.json`` (about 15 minutes on 2 cores).
+``benchmarks/nuts_check.md`` and ``nuts_check.json`` (about 20 minutes on 2 cores).
 
     .venv/bin/python benchmarks/bench_nuts_check.py
 """

@@ -12,7 +12,7 @@ says so. This check runs ``num_chains`` NUTS chains (NumPyro's
 * the median and 90% interval of μ0, a2 and the fold (or a4), chain by chain.
 
 If the chains agree with each other and with SVI, the SVI band is trustworthy.
-If they do not mix (``R̂`` well above 1.01), the chains have found separate
+If they do not mix (``R̂`` above :data:`RHAT_MIXED`), the chains have found separate
 modes, and their spread in μ0 and the fold is a lower bound on the spread the
 data allow. The check reports this; it does not replace the SVI posterior.
 """
