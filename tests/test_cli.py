@@ -170,7 +170,7 @@ def test_fit_writes_summary_posterior_figures(fitted, good_data):
     for r in s["recordings"]:
         assert set(r) >= {"file", "mu", "branch", "amplitude", "predicted"}
         assert r["predicted"]["ci90"][0] <= r["predicted"]["median"] <= r["predicted"]["ci90"][1]
-    chk = s["nuts_check"]  # --nuts-check: 2 short chains in --fast mode
+    chk = s["nuts_check"]  # --nuts-check: 2 short chains (30 + 30) in --fast mode
     assert len(chk["chains"]["mu0"]) == 2 and len(chk["divergences"]) == 2
     assert chk["mixed"] == (chk["max_rhat"] < 1.05)
     assert (fitted / "posterior.nc").stat().st_size > 1000

@@ -34,7 +34,8 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    "'bayeshopf predict' then reports the frequency")
     p.add_argument("--nuts-check", action="store_true",
                    help="also run 4 NUTS chains from the MAP point and report whether they "
-                   "agree with each other and with the SVI bands (summary.json 'nuts_check')")
+                   "agree with each other and with the SVI bands (summary.json 'nuts_check'); "
+                   "with --fast: 2 chains of 30 + 30 steps, a smoke test only")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -158,7 +159,8 @@ def _run_fit(rs, criticality, args, out, truth=None, extra=None):
     if getattr(args, "nuts_check", False):
         from bayeshopf.inference.nuts import nuts_check
 
-        short = dict(num_chains=2, num_warmup=100, num_samples=100) if args.fast else {}
+        short = (dict(num_chains=2, num_warmup=30, num_samples=30, max_tree_depth=6)
+                 if args.fast else {})
         check = nuts_check(result, seed=args.seed, progress=progress, **short)
         extra = {**(extra or {}), "nuts_check": check.to_json()}
     t1 = time.perf_counter()
