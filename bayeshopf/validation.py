@@ -11,7 +11,11 @@ amplitude ``A_i`` is compared with the prediction at its μ and branch:
   the fitted scatter random).
 
 Robustness is then the held-out error ``|Â_i − A_i| / A_i``, the coverage of the
-90% bands, and how far the fold ``μ_SN`` moves from fold to fold.
+90% bands, and how far the fold ``μ_SN`` moves from fold to fold. With few
+folds the coverage is a coarse measure, so the summary also gives the binomial
+probability of so few held-out recordings inside if the bands were calibrated:
+``P(X ≤ k)``, ``X ~ Binomial(n, 0.9)`` (the folds share data, so this treats
+them as more independent than they are).
 """
 
 from __future__ import annotations
@@ -19,12 +23,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import binom
 from tqdm.auto import tqdm
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.summaries import interval
 from bayeshopf.features.orbits import extract_features
 from bayeshopf.pipeline import FitSettings, HopfFit, PointFit, fit, fit_point
+
+#: Nominal coverage of the held-out bands.
+BAND_LEVEL = 0.9
 
 #: The fits compared, in the order reported.
 METHODS = ("bayes", "map", "ml")
@@ -106,8 +114,17 @@ class LeaveOneOut:
         """Number of folds whose held-out amplitude lies in the 90% band."""
         return sum(f.inside(method) for f in self.folds)
 
+    def coverage_p(self, method: str) -> float:
+        """``P(X ≤ k)`` for ``X ~ Binomial(n_folds, 0.9)`` and ``k`` = :meth:`coverage`.
+
+        The probability that calibrated 90% bands would hold this few held-out
+        recordings or fewer; small values (below 0.05, say) mean the bands are
+        too narrow.
+        """
+        return float(binom.cdf(self.coverage(method), len(self.folds), BAND_LEVEL))
+
     def summary(self) -> dict:
-        """Per method: coverage, held-out errors and the spread of the fold across folds."""
+        """Per method: coverage (and :meth:`coverage_p`), held-out errors and the fold's spread."""
         out = {}
         for m in self.methods:
             err = np.array([f.relative_error(m) for f in self.folds])
@@ -117,6 +134,7 @@ class LeaveOneOut:
                 "label": METHOD_LABELS[m],
                 "coverage": self.coverage(m),
                 "n_folds": len(self.folds),
+                "coverage_p": self.coverage_p(m),
                 "mean_relative_error": float(np.nanmean(err)),
                 "max_relative_error": float(np.nanmax(err)),
                 "mu_fold_sd": float(np.nanstd(fold_mu, ddof=1)),

@@ -68,7 +68,8 @@ def main(argv: list[str]) -> int:
     summary["leave_one_out"] = {"summary": loo.summary(), "folds": loo.table()}
     print(f"\nleave-one-out over {len(loo.folds)} folds:")
     for s in loo.summary().values():
-        print(f"  {s['label']:28s} inside 90%: {s['coverage']}/{s['n_folds']}, held-out error "
+        print(f"  {s['label']:28s} inside 90%: {s['coverage']}/{s['n_folds']} "
+              f"(P = {s['coverage_p']:.2f} if calibrated), held-out error "
               f"{100 * s['mean_relative_error']:.1f}% (max {100 * s['max_relative_error']:.1f}%), "
               f"fold spread (sd) {s['mu_fold_sd']:.2f} {rs.mu_units}")
     save_figure(plot_leave_one_out(loo, result.features, mu_units=rs.mu_units),
