@@ -27,12 +27,9 @@ from scipy.stats import binom
 from tqdm.auto import tqdm
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.summaries import interval
+from bayeshopf.diagnostics.summaries import CI, interval
 from bayeshopf.features.orbits import extract_features
 from bayeshopf.pipeline import FitSettings, HopfFit, PointFit, fit, fit_point
-
-#: Nominal coverage of the held-out bands.
-BAND_LEVEL = 0.9
 
 #: The fits compared, in the order reported.
 METHODS = ("bayes", "map", "ml")
@@ -115,13 +112,15 @@ class LeaveOneOut:
         return sum(f.inside(method) for f in self.folds)
 
     def coverage_p(self, method: str) -> float:
-        """``P(X ≤ k)`` for ``X ~ Binomial(n_folds, 0.9)`` and ``k`` = :meth:`coverage`.
+        """``P(X ≤ k)`` for ``X ~ Binomial(n_folds, CI)`` and ``k`` = :meth:`coverage`.
+
+        ``CI`` is the mass of the bands (:data:`~bayeshopf.diagnostics.summaries.CI`, 0.9).
 
         The probability that calibrated 90% bands would hold this few held-out
         recordings or fewer; small values (below 0.05, say) mean the bands are
         too narrow.
         """
-        return float(binom.cdf(self.coverage(method), len(self.folds), BAND_LEVEL))
+        return float(binom.cdf(self.coverage(method), len(self.folds), CI))
 
     def summary(self) -> dict:
         """Per method: coverage (and :meth:`coverage_p`), held-out errors and the fold's spread."""

@@ -81,6 +81,16 @@ def test_fold_moves_less_across_folds_than_with_maximum_likelihood(loo):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the paper's fold lies in 5 of the 7 fold intervals, "
+                   "not 6: without the stable 14.9 or the unstable 16.5 m/s recording the "
+                   "interval ends below 14.66 m/s (14.64 and 14.58)")
+def test_paper_fold_lies_in_six_of_seven_fold_intervals(loo):
+    inside = [f.predictions["bayes"].mu_fold[1] <= PAPER_FOLD <= f.predictions["bayes"].mu_fold[2]
+              for f in loo.folds]
+    assert sum(inside) >= 6, [f.predictions["bayes"].mu_fold for f in loo.folds]
+
+
+@pytest.mark.slow
 def test_loo_table_is_json_ready(loo):
     rows = json.loads(json.dumps(loo.table()))
     assert len(rows) == 7
