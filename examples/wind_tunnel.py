@@ -1,7 +1,7 @@
 """The wind-tunnel flutter rig: the paper's experimental result, with bands and leave-one-out.
 
 Fits the 7 CBC recordings of the authors' flutter rig (4 stable and 3 unstable
-LCOs), decides the criticality from the data by PSIS-LOO, refits without each
+LCOs), decides the criticality from the data (coexisting orbits, PSIS-LOO), refits without each
 recording in turn (Bayesian, MAP only, and maximum likelihood as in the paper),
 and regresses the actuator command on the normal-form state.
 
@@ -44,7 +44,8 @@ def main(argv: list[str]) -> int:
     rs = flutter_cbc(data)
     print(f"{len(rs)} recordings ({int(rs.is_unstable.sum())} unstable) from {data}")
 
-    # 1. Criticality from the data: subcritical against supercritical by PSIS-LOO.
+    # 1. Criticality from the data: coexisting orbits at one airspeed, and
+    #    subcritical against supercritical by PSIS-LOO.
     result, evidence = fit_auto(rs, seed=0, settings=settings, progress=False)
     print(evidence["statement"])
 

@@ -209,3 +209,11 @@ def test_predict_unstable_beyond_hopf_is_clear_error(fitted, capsys):
 def test_predict_missing_fit_folder(tmp_path, capsys):
     assert main(["predict", str(tmp_path), "--mu", "17"]) == 2
     assert "summary.json" in capsys.readouterr().err
+
+
+def test_exact_loo_needs_criticality_auto(good_data, tmp_path, capsys):
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--exact-loo", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "--criticality auto" in err and "got --criticality sub" in err
+    assert not (tmp_path / "o").exists()

@@ -179,3 +179,18 @@ def test_report_has_rhat_per_latent_site_and_draws_per_chain(check):
 def test_one_chain_is_refused(result):
     with pytest.raises(ValueError, match="at least 2"):
         nuts_check(result, num_chains=1)
+
+
+def test_held_out_log_likelihood_of_a_training_recording_is_the_fits_own(result):
+    """The held-out density (prediction recomputed at μ_i) against the model's own coeffs_hat."""
+    from bayeshopf.diagnostics.comparison import held_out_log_likelihood, pointwise_log_likelihood
+    from bayeshopf.model.hybrid import branch_signs
+
+    own = pointwise_log_likelihood(result.samples, result.features)
+    signs = branch_signs(result.features.unstable)
+    for i in range(result.features.n_recordings):
+        ll = held_out_log_likelihood(result.samples, result.spec, result.features, i, signs[i])
+        np.testing.assert_allclose(ll, own[:, i], rtol=1e-8, atol=1e-8)
+    # on the wrong branch the density collapses
+    wrong = held_out_log_likelihood(result.samples, result.spec, result.features, 0, -signs[0])
+    assert np.all(wrong < own[:, 0] - 10)

@@ -68,6 +68,10 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--criticality", choices=("sub", "super", "auto"), default="sub",
                    help="normal form: subcritical (default), supercritical, or auto "
                    "(decided from the data)")
+    f.add_argument("--exact-loo", action="store_true",
+                   help="with --criticality auto: refit each model without every recording "
+                   "whose PSIS Pareto k exceeds 0.7 and use its exact leave-one-out density "
+                   "(one fit per refit)")
     f.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
                    help="channels of the planar pair (default: the first two)")
     _add_fit_options(f)
@@ -152,7 +156,8 @@ def _run_fit(rs, criticality, args, out, truth=None, extra=None):
     t0 = time.perf_counter()
     if criticality == "auto":
         result, evidence = fit_auto(rs, seed=args.seed, settings=_settings(args),
-                                    progress=progress)
+                                    progress=progress,
+                                    exact_loo=getattr(args, "exact_loo", False))
         extra = {**(extra or {}), "criticality_evidence": evidence}
     else:
         result = fit(rs, criticality, seed=args.seed, settings=_settings(args), progress=progress)
@@ -213,8 +218,13 @@ def cmd_fit(args) -> int:
     """``bayeshopf fit``."""
     from bayeshopf.data import load_recordings
 
-    rs = load_recordings(args.data, planar=tuple(args.planar) if args.planar else None)
     crit = {"sub": "subcritical", "super": "supercritical", "auto": "auto"}[args.criticality]
+    if args.exact_loo and crit != "auto":
+        from bayeshopf.errors import FitError
+
+        raise FitError(f"--exact-loo compares the two normal forms and needs --criticality "
+                       f"auto; got --criticality {args.criticality}")
+    rs = load_recordings(args.data, planar=tuple(args.planar) if args.planar else None)
     summary = _run_fit(rs, crit, args, args.out)
     _print_table(summary)
     print(f"\nwrote {args.out}/summary.json, posterior.nc, model.json and figures/ "

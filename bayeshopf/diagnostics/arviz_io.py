@@ -78,37 +78,108 @@ def read_posterior(path: str | os.PathLike[str]) -> tuple[dict, dict]:
     return samples, dict(post.attrs)
 
 
-def loo(log_lik) -> dict:
-    """PSIS-LOO of pointwise log-likelihoods ``(n_draws, n_obs)`` (one chain).
+def _log_lik_idata(ll) -> az.InferenceData:
+    ll = np.asarray(ll)
+    return az.from_dict(posterior={"_": np.zeros((1, ll.shape[0]))},
+                        log_likelihood={"obs": ll[None]})
 
-    Returns:
-        ``{"elpd": ..., "se": ..., "pareto_k": [...], "p_loo": ...}``.
+
+class _Refits(az.SamplingWrapper):
+    """ArviZ's sampling wrapper over a callback ``i ↦ log p(y_i | θ_s^(−i))``.
+
+    ``reloo`` asks the wrapper to drop observation i, refit and evaluate the
+    held-out log-likelihood; here one callback does all three.
     """
-    ll = np.asarray(log_lik)
-    idata = az.from_dict(posterior={"_": np.zeros((1, ll.shape[0]))},
-                         log_likelihood={"obs": ll[None]})
+
+    def __init__(self, idata, held_out_log_lik):
+        super().__init__(model=None, idata_orig=idata)
+        self._held_out = held_out_log_lik
+
+    def check_implemented_methods(self, methods):
+        # ArviZ checks by calling every method with a dummy argument, which here
+        # would run a refit; all four are implemented
+        return []
+
+    def sel_observations(self, idx):
+        i = int(np.ravel(idx)[0])
+        return i, i
+
+    def sample(self, modified_observed_data):
+        return modified_observed_data
+
+    def get_inference_data(self, fitted):
+        return fitted
+
+    def log_likelihood__i(self, excluded_obs, idata__i):
+        import xarray as xr
+
+        return xr.DataArray(np.asarray(self._held_out(int(excluded_obs)), dtype=float))
+
+
+def _elpd(log_lik, held_out_log_lik=None, k_thresh: float = 0.7):
+    """ArviZ ``ELPDData``: PSIS-LOO, or ``reloo`` where Pareto k exceeds ``k_thresh``."""
+    idata = _log_lik_idata(log_lik)
     with warnings.catch_warnings():  # large Pareto k is reported by the callers
         warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
         res = az.loo(idata, pointwise=True)
+        if held_out_log_lik is None:
+            return res, []
+        refitted = [int(i) for i in np.flatnonzero(np.asarray(res["pareto_k"]) > k_thresh)]
+        warnings.filterwarnings("ignore", message="reloo is an experimental")
+        return az.reloo(_Refits(idata, held_out_log_lik), res, k_thresh=k_thresh,
+                        verbose=False), refitted
+
+
+def _loo_dict(res, refitted, log_lik) -> dict:
+    psis = _elpd(log_lik)[0] if refitted else res
     return {
         "elpd": float(res["elpd_loo"]),
         "se": float(res["se"]),
         "p_loo": float(res["p_loo"]),
-        "pareto_k": [float(k) for k in np.asarray(res["pareto_k"])],
+        "pareto_k": [float(v) for v in np.asarray(psis["pareto_k"])],
+        "elpd_i": [float(v) for v in np.asarray(res["loo_i"])],
+        "refitted": refitted,
     }
 
 
-def compare(log_liks: dict) -> dict:
-    """ArviZ ``compare`` of models by PSIS-LOO; returns name -> rank, elpd, dse, weight."""
-    data = {
-        name: az.from_dict(posterior={"_": np.zeros((1, np.shape(ll)[0]))},
-                           log_likelihood={"obs": np.asarray(ll)[None]})
-        for name, ll in log_liks.items()
-    }
-    with warnings.catch_warnings():  # large Pareto k is reported by the callers
-        warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
-        table = az.compare(data, ic="loo")
-    return {
+def loo(log_lik, held_out_log_lik=None, k_thresh: float = 0.7) -> dict:
+    """PSIS-LOO of pointwise log-likelihoods ``(n_draws, n_obs)`` (one chain).
+
+    Args:
+        log_lik: ``log p(y_i | θ_s)`` for the posterior draws θ_s.
+        held_out_log_lik: Optional ``i ↦ log p(y_i | θ_s^(−i))`` over the draws
+            of a refit without observation i. When given, the observations whose
+            Pareto k exceeds ``k_thresh`` get their exact leave-one-out density
+            ``log mean_s p(y_i | θ_s^(−i))`` from it (ArviZ ``reloo``) instead of PSIS.
+        k_thresh: Pareto k above which PSIS is not trusted.
+
+    Returns:
+        ``{"elpd", "se", "pareto_k": [...], "p_loo", "elpd_i": [...], "refitted": [i...]}``;
+        ``pareto_k`` holds the PSIS values, also for the refitted observations.
+    """
+    res, refitted = _elpd(log_lik, held_out_log_lik, k_thresh)
+    return _loo_dict(res, refitted, log_lik)
+
+
+def compare_with_loo(log_liks: dict, held_out: dict | None = None,
+                     k_thresh: float = 0.7) -> tuple[dict, dict]:
+    """ArviZ ``compare`` of models by LOO, and each model's :func:`loo`.
+
+    Args:
+        log_liks: Model name → pointwise log-likelihoods ``(n_draws, n_obs)``.
+        held_out: Optional model name → ``i ↦ log p(y_i | θ_s^(−i))`` (see
+            :func:`loo`): exact refits where that model's Pareto k exceeds
+            ``k_thresh``.
+        k_thresh: Pareto k above which PSIS is not trusted.
+
+    Returns:
+        ``(table, loos)``: name → rank, elpd_loo, elpd_diff, dse, weight; and
+        name → the :func:`loo` dictionary.
+    """
+    held_out = held_out or {}
+    elpds = {name: _elpd(ll, held_out.get(name), k_thresh) for name, ll in log_liks.items()}
+    table = az.compare({name: e[0] for name, e in elpds.items()}, ic="loo")
+    rows = {
         str(name): {
             "rank": int(row["rank"]),
             "elpd_loo": float(row["elpd_loo"]),
@@ -118,3 +189,10 @@ def compare(log_liks: dict) -> dict:
         }
         for name, row in table.iterrows()
     }
+    loos = {name: _loo_dict(*elpds[name], log_liks[name]) for name in log_liks}
+    return rows, loos
+
+
+def compare(log_liks: dict) -> dict:
+    """ArviZ ``compare`` of models by PSIS-LOO; returns name -> rank, elpd, dse, weight."""
+    return compare_with_loo(log_liks)[0]
