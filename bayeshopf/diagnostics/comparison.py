@@ -49,8 +49,9 @@ def held_out_log_likelihood(samples: dict, spec: ModelSpec, features: OrbitFeatu
 
     def build():
         # lax.map, not vmap: on the rig (jaxlib 0.10.2, CPU), the vmapped QR
-        # least squares of 400 draws compiled to a program that never returned
-        # (idle, 0% CPU); mapping in batches of 50 runs in a fraction of a second
+        # least squares of 400 draws compiled to a program whose result never
+        # materialised (block_until_ready idle at 0% CPU; the XLA CPU hang family
+        # of jax-ml/jax#24219 and #25861); batches of 50 run in under a second
         def f(sites, mu, sign):
             return jax.lax.map(lambda s: hybrid.predicted_coeffs(
                 hybrid.params_from_sites(s, spec), mu, sign, spec), sites,
