@@ -25,13 +25,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 from bench_calibration import _atomic_write  # noqa: E402
+from bench_nuts_check import rig_recordings  # noqa: E402
 
-from bayeshopf import datasets  # noqa: E402
 from bayeshopf.diagnostics.comparison import compare_criticality  # noqa: E402
 from bayeshopf.pipeline import fit, loo_refit  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-CBC_DIR = HERE.parent / ".." / "shared" / "data" / "flutter_cbc"
 
 
 def _row(ev: dict) -> dict:
@@ -76,10 +75,9 @@ def markdown(psis: dict, exact: dict, names, seconds: float, scatter: dict,
 
 
 def main() -> int:
-    if not CBC_DIR.is_dir():
-        print(f"benchmark: the recordings are not at {CBC_DIR}", file=sys.stderr)
+    rs = rig_recordings()
+    if rs is None:
         return 2
-    rs = datasets.flutter_cbc(CBC_DIR)
     t0 = time.perf_counter()
     fits = {c: fit(rs, c, seed=0, progress=True, single_branch=c == "supercritical")
             for c in ("subcritical", "supercritical")}

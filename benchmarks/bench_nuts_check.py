@@ -105,11 +105,18 @@ def markdown(rows) -> str:
     return "\n".join(out)
 
 
-def main() -> int:
+def rig_recordings():
+    """The 7 CBC recordings from ../shared, or ``None`` (with a message) when absent."""
     if not CBC_DIR.is_dir():
         print(f"benchmark: the recordings are not at {CBC_DIR}", file=sys.stderr)
+        return None
+    return datasets.flutter_cbc(CBC_DIR)
+
+
+def main() -> int:
+    rs = rig_recordings()
+    if rs is None:
         return 2
-    rs = datasets.flutter_cbc(CBC_DIR)
     feats = extract_features(rs, n_h=FitSettings().n_h)
     rows = [one(rs, feats, held) for held in CASES]
     _atomic_write(HERE / "nuts_check.json", json.dumps(rows, indent=1))
