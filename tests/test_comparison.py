@@ -94,3 +94,45 @@ def test_evidence_with_unbounded_separation_is_written_as_strict_json(tmp_path):
                  "z": float("nan"), "n": 3}, path)
     assert json.loads(path.read_text()) == {
         "coexisting": [{"separation": None, "amplitudes": [0.1, 0.2]}], "z": None, "n": 3}
+
+
+def _fake_fit(pred_a0, sigma0, features, n_draws=200, seed=0):
+    """A fit-like record whose draws predict a0 = pred_a0 (per recording) with scatter σ_0."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    n_rec, n_c = features.coeffs.shape
+    hat = np.tile(features.coeffs, (n_draws, 1, 1))
+    hat[:, :, 0] = np.asarray(pred_a0)[None] + 1e-3 * rng.standard_normal((n_draws, n_rec))
+    sigma = np.full((n_draws, (n_c + 1) // 2), 0.01)
+    sigma[:, 0] = sigma0
+    return SimpleNamespace(samples={"sigma": sigma, "coeffs_hat": hat}, features=features)
+
+
+def test_coexisting_orbits_overrule_an_elpd_that_prefers_one_lco_per_mu():
+    """Two orbits at one μ overrule the ELPD's supercritical choice; the statement says so."""
+    from types import SimpleNamespace
+
+    from bayeshopf.diagnostics.comparison import compare_criticality
+
+    mu = np.array([1.0, 1.0, 1.5, 2.0])
+    a0 = np.array([1.0, 0.6, 1.1, 1.2])
+    coeffs = np.zeros((4, 5))
+    coeffs[:, 0] = a0
+    features = SimpleNamespace(mu=mu, coeffs=coeffs, coeffs_sd=np.full((4, 5), 1e-3),
+                               amplitude=2 * a0, amplitude_sd=np.full(4, 0.01),
+                               names=("s1", "u1", "s15", "s2"))
+    # the subcritical draws miss recording 3 badly; the supercritical ones are vague everywhere
+    sub = _fake_fit([1.0, 0.6, 1.1, 1.6], 0.02, features)
+    sup = _fake_fit([0.8, 0.8, 1.1, 1.2], 0.25, features)
+    ev = compare_criticality({"subcritical": sub, "supercritical": sup})
+    assert ev["elpd_preferred"] == "supercritical"
+    assert ev["preferred"] == "subcritical" and ev["decided_by"] == "coexisting orbits"
+    assert ev["coexisting"][0]["recordings"] == ("s1", "u1")
+    assert ev["coexisting"][0]["separation"] == pytest.approx(0.8 / 0.01)
+    assert "so the subcritical model is chosen" in ev["statement"]
+    # without the pair (the unstable orbit moved to its own μ) the ELPD decides
+    features.mu = np.array([1.0, 1.25, 1.5, 2.0])
+    ev = compare_criticality({"subcritical": sub, "supercritical": sup})
+    assert ev["preferred"] == ev["elpd_preferred"] == "supercritical"
+    assert ev["decided_by"] == "elpd" and ev["coexisting"] == []
