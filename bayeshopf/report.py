@@ -122,19 +122,19 @@ def check_output_folder(out: str | os.PathLike[str], force: bool) -> Path:
     return out
 
 
-def _json_ready(obj):
+def json_ready(obj):
     """``obj`` with every non-finite float as ``None`` (strict JSON has no inf or nan)."""
     if isinstance(obj, dict):
-        return {k: _json_ready(v) for k, v in obj.items()}
+        return {k: json_ready(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_json_ready(v) for v in obj]
+        return [json_ready(v) for v in obj]
     if isinstance(obj, float):
         return _finite_or_none(obj)
     return obj
 
 
 def _write_json(obj, path: Path) -> None:
-    path.write_text(json.dumps(_json_ready(obj), indent=2, allow_nan=False) + "\n")
+    path.write_text(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
 
 
 def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=None,

@@ -115,6 +115,7 @@ def test_criticality_from_the_data_is_subcritical(auto):
     assert pairs[16.5]["amplitudes"] == pytest.approx((0.0642, 0.0195), abs=5e-4)
     assert min(p["separation"] for p in pairs.values()) > 10
     assert "two distinct orbits" in evidence["statement"]
+    assert "subcritical" in evidence["statement"]
 
 
 @pytest.mark.xfail(strict=True, reason=(

@@ -49,24 +49,11 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
-def _clean(o):
-    """NaN and infinities to None (report.json is strict JSON)."""
-    import math
-
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
-    if isinstance(o, dict):
-        return {k: _clean(v) for k, v in o.items()}
-    if isinstance(o, list | tuple):
-        return [_clean(v) for v in o]
-    return o
-
-
 def write_report(report, out: str | os.PathLike[str], *, force: bool = False,
                  figures: bool = True) -> Path:
     """Write ``report.json``, ``report.md`` and ``figures/`` into ``out`` atomically."""
     from bayeshopf.errors import OutputError
-    from bayeshopf.report import check_output_folder
+    from bayeshopf.report import check_output_folder, json_ready
 
     out = check_output_folder(out, force)
     tag = uuid.uuid4().hex[:8]
@@ -74,7 +61,7 @@ def write_report(report, out: str | os.PathLike[str], *, force: bool = False,
     try:
         tmp.mkdir(parents=True)
         data = json.loads(json.dumps(report.to_json(), default=_json_default))
-        (tmp / "report.json").write_text(json.dumps(_clean(data), indent=2, allow_nan=False)
+        (tmp / "report.json").write_text(json.dumps(json_ready(data), indent=2, allow_nan=False)
                                          + "\n", encoding="utf-8")
         (tmp / "report.md").write_text(report.to_markdown(), encoding="utf-8")
         if figures:

@@ -117,26 +117,30 @@ class _Refits(az.SamplingWrapper):
 
 
 def _elpd(log_lik, held_out_log_lik=None, k_thresh: float = 0.7):
-    """ArviZ ``ELPDData``: PSIS-LOO, or ``reloo`` where Pareto k exceeds ``k_thresh``."""
+    """``(ELPDData, PSIS Pareto k, refitted observations)``.
+
+    The ``ELPDData`` is PSIS-LOO's, or ``reloo``'s where Pareto k exceeds ``k_thresh``.
+    """
     idata = _log_lik_idata(log_lik)
     with warnings.catch_warnings():  # large Pareto k is reported by the callers
         warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
         res = az.loo(idata, pointwise=True)
+        # a copy: reloo zeroes the k of the refitted observations in place
+        pareto_k = np.array(res["pareto_k"], dtype=float)
         if held_out_log_lik is None:
-            return res, []
-        refitted = [int(i) for i in np.flatnonzero(np.asarray(res["pareto_k"]) > k_thresh)]
+            return res, pareto_k, []
+        refitted = [int(i) for i in np.flatnonzero(pareto_k > k_thresh)]
         warnings.filterwarnings("ignore", message="reloo is an experimental")
         return az.reloo(_Refits(idata, held_out_log_lik), res, k_thresh=k_thresh,
-                        verbose=False), refitted
+                        verbose=False), pareto_k, refitted
 
 
-def _loo_dict(res, refitted, log_lik) -> dict:
-    psis = _elpd(log_lik)[0] if refitted else res
+def _loo_dict(res, pareto_k, refitted) -> dict:
     return {
         "elpd": float(res["elpd_loo"]),
         "se": float(res["se"]),
         "p_loo": float(res["p_loo"]),
-        "pareto_k": [float(v) for v in np.asarray(psis["pareto_k"])],
+        "pareto_k": [float(v) for v in pareto_k],
         "elpd_i": [float(v) for v in np.asarray(res["loo_i"])],
         "refitted": refitted,
     }
@@ -157,8 +161,7 @@ def loo(log_lik, held_out_log_lik=None, k_thresh: float = 0.7) -> dict:
         ``{"elpd", "se", "pareto_k": [...], "p_loo", "elpd_i": [...], "refitted": [i...]}``;
         ``pareto_k`` holds the PSIS values, also for the refitted observations.
     """
-    res, refitted = _elpd(log_lik, held_out_log_lik, k_thresh)
-    return _loo_dict(res, refitted, log_lik)
+    return _loo_dict(*_elpd(log_lik, held_out_log_lik, k_thresh))
 
 
 def compare_with_loo(log_liks: dict, held_out: dict | None = None,
@@ -189,7 +192,7 @@ def compare_with_loo(log_liks: dict, held_out: dict | None = None,
         }
         for name, row in table.iterrows()
     }
-    loos = {name: _loo_dict(*elpds[name], log_liks[name]) for name in log_liks}
+    loos = {name: _loo_dict(*e) for name, e in elpds.items()}
     return rows, loos
 
 

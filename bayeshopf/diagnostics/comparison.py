@@ -22,10 +22,18 @@ def pointwise_log_likelihood(samples: dict, features: OrbitFeatures) -> np.ndarr
     The likelihood of the model: ``Φ(R_i) ~ N(Φ(R̂_i), √(σ_k² + s_i²))``, summed
     over the coefficients of recording i.
     """
-    per_coeff = np.asarray(harmonic_scatter(np.asarray(samples["sigma"])))
-    scale = np.sqrt(per_coeff[:, None, :] ** 2 + features.coeffs_sd[None] ** 2)
-    lp = norm.logpdf(features.coeffs[None], loc=np.asarray(samples["coeffs_hat"]), scale=scale)
-    return lp.sum(axis=-1)
+    return _coeff_log_density(samples["sigma"][:, None], np.asarray(samples["coeffs_hat"]),
+                              features.coeffs, features.coeffs_sd)
+
+
+def _coeff_log_density(sigma, pred, coeffs, coeffs_sd) -> np.ndarray:
+    """``Σ_c log N(Φ_c; Φ̂_c, √(σ_k(c)² + s_c²))`` over the last axis (the likelihood).
+
+    ``sigma`` holds one scatter per harmonic order and broadcasts against ``pred``.
+    """
+    per_coeff = np.asarray(harmonic_scatter(np.asarray(sigma)))
+    scale = np.sqrt(per_coeff**2 + np.asarray(coeffs_sd) ** 2)
+    return norm.logpdf(np.asarray(coeffs), loc=pred, scale=scale).sum(axis=-1)
 
 
 #: Draws per batch of the held-out prediction (see held_out_log_likelihood).
@@ -61,9 +69,7 @@ def held_out_log_likelihood(samples: dict, spec: ModelSpec, features: OrbitFeatu
 
     pred = np.asarray(hybrid.jit_for_spec(spec, "held_out_coeffs", build)(
         sites, jnp.asarray(features.mu[i], dtype=float), jnp.asarray(sign, dtype=float)))
-    per_coeff = np.asarray(harmonic_scatter(np.asarray(samples["sigma"])))
-    scale = np.sqrt(per_coeff**2 + features.coeffs_sd[i][None] ** 2)
-    lp = norm.logpdf(features.coeffs[i][None], loc=pred, scale=scale).sum(axis=-1)
+    lp = _coeff_log_density(samples["sigma"], pred, features.coeffs[i], features.coeffs_sd[i])
     return np.where(np.isfinite(lp), lp, -np.inf)
 
 
