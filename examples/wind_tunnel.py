@@ -3,7 +3,8 @@
 Fits the 7 CBC recordings of the authors' flutter rig (4 stable and 3 unstable
 LCOs), decides the criticality from the data (coexisting orbits, PSIS-LOO), refits without each
 recording in turn (Bayesian, MAP only, and maximum likelihood as in the paper),
-and regresses the actuator command on the normal-form state.
+checks the normal form on the stable/unstable pairs without any map, and
+regresses the actuator command on the normal-form state.
 
     python examples/wind_tunnel.py [DATA_DIR] [OUTPUT_DIR]
 
@@ -22,6 +23,7 @@ import tempfile
 from pathlib import Path
 
 from bayeshopf.datasets import flutter_cbc
+from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
 from bayeshopf.inference.channels import fit_channel
 from bayeshopf.pipeline import FitSettings, fit_auto
 from bayeshopf.plotting import plot_all, save_figure
@@ -75,6 +77,25 @@ def main(argv: list[str]) -> int:
               f"fold spread (sd) {s['mu_fold_sd']:.2f} {rs.mu_units}")
     save_figure(plot_leave_one_out(loo, result.features, mu_units=rs.mu_units),
                 out / "figures" / "leave_one_out.png")
+
+    # 3b. The same question without any map: at a μ with both orbits,
+    #     x = (A_s A_u)²/(A_s² + A_u²)² = (μ0 − μ)/a2² whatever the map's gain,
+    #     so the pairs give μ0, a2 and the fold, and two pairs predict the third.
+    pairs = pair_invariants(result.features)
+    line = invariant_line(pairs)
+    print("\nmap-free pair invariant: " + ", ".join(
+        f"{name} {line.interval(name).median:.2f} [{line.interval(name).lo:.2f}, "
+        f"{line.interval(name).hi:.2f}]" for name in ("mu0", "a2", "mu_fold")))
+    summary["pair_invariant"] = {name: line.interval(name).to_json()
+                                 for name in ("mu0", "a2", "mu_fold")}
+    for k, held in enumerate(pairs):
+        rest = [p for i, p in enumerate(pairs) if i != k]
+        if len({p.mu for p in rest}) < 2:
+            continue
+        pred = invariant_line(rest).unstable_amplitude(held.mu, held.stable_amplitude)
+        print(f"  without {held.unstable}: {1e3 * held.unstable_amplitude:.1f} mm measured, "
+              f"{1e3 * pred.median:.1f} [{1e3 * pred.lo:.1f}, {1e3 * pred.hi:.1f}] mm "
+              "from the other pairs")
 
     # 4. A third channel: the actuator command, regressed after inverting U12.
     channel = fit_channel(result, rs, "actuator", n_draws=40 if FAST else 100)
