@@ -28,6 +28,7 @@ from bayeshopf.inference.channels import fit_channel
 from bayeshopf.pipeline import FitSettings, fit_auto
 from bayeshopf.plotting import plot_all, save_figure
 from bayeshopf.plotting.channels import plot_channel
+from bayeshopf.plotting.pair_invariant import plot_pair_invariant
 from bayeshopf.plotting.validation import plot_leave_one_out
 from bayeshopf.validation import leave_one_out
 
@@ -88,6 +89,8 @@ def main(argv: list[str]) -> int:
         f"{line.interval(name).hi:.2f}]" for name in ("mu0", "a2", "mu_fold")))
     summary["pair_invariant"] = {name: line.interval(name).to_json()
                                  for name in ("mu0", "a2", "mu_fold")}
+    save_figure(plot_pair_invariant(pairs, fit=result, mu_units=rs.mu_units),
+                out / "figures" / "pair_invariant.png")
     for k, held in enumerate(pairs):
         rest = [p for i, p in enumerate(pairs) if i != k]
         if len({p.mu for p in rest}) < 2:

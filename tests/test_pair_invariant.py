@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from bayeshopf.diagnostics.pair_invariant import (
     invariant,
@@ -14,6 +15,7 @@ from bayeshopf.diagnostics.pair_invariant import (
     unstable_amplitude_from,
 )
 from bayeshopf.model.normal_form import STABLE, UNSTABLE, fold_point, lco_radius
+from bayeshopf.plotting.pair_invariant import plot_pair_invariant
 
 MU0, A2 = 17.5, 3.3
 
@@ -77,3 +79,29 @@ def test_needs_two_mu():
     f = _features([15.0], [15.0], lambda m: np.ones_like(m))
     with pytest.raises(ValueError, match="two or more distinct μ"):
         invariant_line(pair_invariants(f))
+
+
+def test_plot_pair_invariant():
+    f = _features([14.9, 15.7, 16.5], [14.9, 15.7, 16.5], lambda m: 0.02 + 0.01 * (m - 14.0), 1e-4)
+    pairs = pair_invariants(f)
+    rng = np.random.default_rng(0)
+    fake_fit = SimpleNamespace(samples={"mu0": MU0 + 0.01 * rng.normal(size=200),
+                                        "a2": A2 + 0.01 * rng.normal(size=200)})
+    fig = plot_pair_invariant(pairs, fit=fake_fit)
+    ax = fig.axes[0]
+    lines = {}
+    for ln in ax.lines:  # an errorbar's data line comes before its caps
+        lines.setdefault(ln.get_gid(), ln)
+    (line,) = [ln for ln in ax.lines if ln.get_gid() == "all-pairs-line"]
+    mu, x = line.get_data()
+    np.testing.assert_allclose(x, (MU0 - mu) / A2**2, atol=1e-4)
+    fit_mu, fit_x = lines["fit-line"].get_data()
+    np.testing.assert_allclose(fit_x, (MU0 - fit_mu) / A2**2, atol=2e-3)
+    # one leave-one-pair-out line and prediction per pair, and the measured points
+    for k, held in enumerate(pairs):
+        rest = invariant_line([p for i, p in enumerate(pairs) if i != k])
+        assert lines[f"predicted-{k}"].get_ydata()[0] == pytest.approx(
+            np.median(rest.x_draws(held.mu)))
+        assert f"without-{k}" in lines
+    np.testing.assert_allclose(lines["measured"].get_ydata(), [p.x for p in pairs])
+    assert isinstance(fig, Figure)

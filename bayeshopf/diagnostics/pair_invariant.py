@@ -143,12 +143,14 @@ class InvariantLine:
         return self.mu0 - self.a2**2 / 4
 
     def x_draws(self, mu) -> np.ndarray:
-        """The line's x at ``mu`` for each draw."""
-        return self.draws[:, 0] * float(mu) + self.draws[:, 1]
+        """The line's x at ``mu`` for each draw, shape ``(n_draws,) + shape(mu)``."""
+        mu = np.asarray(mu, dtype=float)
+        slope, icpt = self.draws[:, 0], self.draws[:, 1]
+        return np.multiply.outer(slope, mu) + icpt.reshape((-1,) + (1,) * mu.ndim)
 
-    def x_at(self, mu) -> float:
+    def x_at(self, mu):
         """The line's x at ``mu`` (from the measured x)."""
-        return (self.mu0 - float(mu)) / self.a2**2
+        return (self.mu0 - np.asarray(mu, dtype=float)) / self.a2**2
 
     def unstable_amplitude(self, mu, stable_amplitude) -> Interval:
         """Predicted A_u at ``mu`` given A_s there: 90% interval over the draws."""
