@@ -23,7 +23,11 @@ import tempfile
 from pathlib import Path
 
 from bayeshopf.datasets import flutter_cbc
-from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
+from bayeshopf.diagnostics.pair_invariant import (
+    invariant_line,
+    leave_one_pair_out,
+    pair_invariants,
+)
 from bayeshopf.inference.channels import fit_channel
 from bayeshopf.pipeline import FitSettings, fit_auto
 from bayeshopf.plotting import plot_all, save_figure
@@ -91,11 +95,8 @@ def main(argv: list[str]) -> int:
                                  for name in ("mu0", "a2", "mu_fold")}
     save_figure(plot_pair_invariant(pairs, fit=result, mu_units=rs.mu_units),
                 out / "figures" / "pair_invariant.png")
-    for k, held in enumerate(pairs):
-        rest = [p for i, p in enumerate(pairs) if i != k]
-        if len({p.mu for p in rest}) < 2:
-            continue
-        pred = invariant_line(rest).unstable_amplitude(held.mu, held.stable_amplitude)
+    for held, other in leave_one_pair_out(pairs):
+        pred = other.unstable_amplitude(held.mu, held.stable_amplitude)
         print(f"  without {held.unstable}: {1e3 * held.unstable_amplitude:.1f} mm measured, "
               f"{1e3 * pred.median:.1f} [{1e3 * pred.lo:.1f}, {1e3 * pred.hi:.1f}] mm "
               "from the other pairs")

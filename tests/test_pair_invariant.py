@@ -11,6 +11,7 @@ from matplotlib.figure import Figure
 from bayeshopf.diagnostics.pair_invariant import (
     invariant,
     invariant_line,
+    leave_one_pair_out,
     pair_invariants,
     unstable_amplitude_from,
 )
@@ -61,8 +62,11 @@ def test_two_pairs_predict_the_third_and_interpolation():
     pairs = pair_invariants(f)
     assert pairs[1].stable == ("s15.6", "s16.5")
     assert pairs[1].x == pytest.approx((MU0 - 16.0) / A2**2, rel=1e-9)
-    held = pairs[2]
-    pred = invariant_line(pairs[:2]).unstable_amplitude(held.mu, held.stable_amplitude)
+    loo = leave_one_pair_out(pairs)
+    assert [h.mu for h, _ in loo] == [14.9, 16.0, 16.5]
+    held, line = loo[2]
+    assert line.draws == pytest.approx(invariant_line(pairs[:2]).draws)
+    pred = line.unstable_amplitude(held.mu, held.stable_amplitude)
     assert pred.median == pytest.approx(held.unstable_amplitude, rel=1e-4)
     assert pred.contains(held.unstable_amplitude)
 

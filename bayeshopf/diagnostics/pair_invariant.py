@@ -181,3 +181,13 @@ def invariant_line(pairs: list[PairInvariant]) -> InvariantLine:
         mu0=float(-intercept / slope),
         a2=float(1.0 / np.sqrt(-slope)) if slope < 0 else float("nan"),
         residuals=tuple((x - (slope * mu + intercept)).tolist()), draws=draws)
+
+
+def leave_one_pair_out(pairs: list[PairInvariant]) -> list[tuple[PairInvariant, InvariantLine]]:
+    """Each pair with the line through the others (where they span two distinct μ)."""
+    out = []
+    for k, held in enumerate(pairs):
+        rest = [p for i, p in enumerate(pairs) if i != k]
+        if len({p.mu for p in rest}) >= 2:
+            out.append((held, invariant_line(rest)))
+    return out

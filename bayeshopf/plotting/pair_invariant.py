@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from bayeshopf.diagnostics.pair_invariant import PairInvariant, invariant_line
+from bayeshopf.diagnostics.pair_invariant import (
+    PairInvariant,
+    invariant_line,
+    leave_one_pair_out,
+)
 from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
@@ -61,11 +65,7 @@ def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str =
                 label="hybrid fit: (μ0 − μ)/a2²", gid="fit-line")
         ax.fill_between(grid, q[0], q[2], color=BRANCH_COLOURS["stable"], alpha=0.2, lw=0,
                         gid="fit-band")
-    for k, held in enumerate(pairs):
-        rest = [p for i, p in enumerate(pairs) if i != k]
-        if len({p.mu for p in rest}) < 2:
-            continue
-        other = invariant_line(rest)
+    for k, (held, other) in enumerate(leave_one_pair_out(pairs)):
         ax.plot(grid, other.x_at(grid), color=_HELD_COLOURS[k % 7], lw=0.9, ls="--",
                 label=f"without {held.mu:g} {mu_units}".rstrip(), gid=f"without-{k}")
         pred = np.quantile(other.x_draws(held.mu), _Q)
