@@ -80,6 +80,11 @@ SAME_MU_FRACTION = 0.01
 DISTINCT_ORBITS = 3.0
 
 
+def same_mu_tolerance(mu, same_mu_fraction: float = SAME_MU_FRACTION) -> float:
+    """Largest μ difference at which two recordings count as at one μ (a fraction of the span)."""
+    return same_mu_fraction * max(float(np.ptp(np.asarray(mu, dtype=float))), 1e-12)
+
+
 def coexisting_orbits(features: OrbitFeatures,
                       same_mu_fraction: float = SAME_MU_FRACTION) -> list[dict]:
     """Pairs of recordings at one μ, and how far apart their amplitudes are.
@@ -102,7 +107,7 @@ def coexisting_orbits(features: OrbitFeatures,
         (single segments).
     """
     mu = np.asarray(features.mu, dtype=float)
-    tol = same_mu_fraction * max(float(np.ptp(mu)), 1e-12)
+    tol = same_mu_tolerance(mu, same_mu_fraction)
     amp, sd = np.asarray(features.amplitude), np.asarray(features.amplitude_sd)
     pairs = []
     for i in range(mu.size):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayeshopf.diagnostics.comparison import SAME_MU_FRACTION, same_mu_tolerance
 from bayeshopf.diagnostics.summaries import Interval, interval
 
 
@@ -82,7 +83,7 @@ def _stable_weights(mu, stable_mu, tol):
     return [i, j], [1.0 - t, t]
 
 
-def pair_invariants(features, *, same_mu_fraction: float = 0.01, n_draws: int = 4000,
+def pair_invariants(features, *, same_mu_fraction: float = SAME_MU_FRACTION, n_draws: int = 4000,
                     seed: int = 0) -> list[PairInvariant]:
     """The invariant ``x`` at every unstable recording with stable ones at or beside its μ.
 
@@ -90,7 +91,9 @@ def pair_invariants(features, *, same_mu_fraction: float = 0.01, n_draws: int = 
         features: :class:`~bayeshopf.features.orbits.OrbitFeatures` (``mu``,
             ``unstable``, ``amplitude``, ``amplitude_sd`` and ``names`` are used).
         same_mu_fraction: A stable recording closer in μ than this fraction of
-            the μ span is taken as at the same μ; otherwise A_s is interpolated.
+            the μ span is taken as at the same μ (as in
+            :func:`~bayeshopf.diagnostics.comparison.coexisting_orbits`);
+            otherwise A_s is interpolated.
         n_draws: Draws of the amplitudes for the intervals.
         seed: Seed of those draws.
 
@@ -101,7 +104,7 @@ def pair_invariants(features, *, same_mu_fraction: float = 0.01, n_draws: int = 
     unstable = np.asarray(features.unstable, dtype=bool)
     amp = np.asarray(features.amplitude, dtype=float)
     sd = np.asarray(features.amplitude_sd, dtype=float)
-    tol = same_mu_fraction * max(float(np.ptp(mu)), 1e-12)
+    tol = same_mu_tolerance(mu, same_mu_fraction)
     st = np.flatnonzero(~unstable)
     rng = np.random.default_rng(seed)
     out = []
