@@ -153,20 +153,9 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
     Returns:
         The output folder.
     """
-    out = check_output_folder(out, force)
-    parent = out.parent if str(out.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
-    except OSError as e:
-        raise OutputError(f"{out}: cannot create the output folder ({e.strerror})") from None
-    try:
-        timings = {}
-        if figures is not None:
-            (stage / FIGURES).mkdir()
-            t0 = time.perf_counter()
-            figures(stage / FIGURES)
-            timings["figures"] = time.perf_counter() - t0
+    def write(stage: Path) -> None:
+        nonlocal fit
+        timings = _draw_figures(figures, stage)
         fit = replace(fit, timings={**fit.timings, **timings})
         _write_json(summary_dict(fit, ppc, extra_summary), stage / SUMMARY)
         _write_json(fit.spec.to_dict(), stage / MODEL)
@@ -182,6 +171,30 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
                    "bayeshopf_version": bayeshopf.__version__},
         )
         arviz_io.write_netcdf(idata, stage / POSTERIOR)
+
+    return _staged(out, force, write)
+
+
+def _draw_figures(figures, stage: Path) -> dict:
+    if figures is None:
+        return {}
+    (stage / FIGURES).mkdir()
+    t0 = time.perf_counter()
+    figures(stage / FIGURES)
+    return {"figures": time.perf_counter() - t0}
+
+
+def _staged(out, force: bool, write) -> Path:
+    """Run ``write(stage)`` in a staging folder, then move its files into ``out`` atomically."""
+    out = check_output_folder(out, force)
+    parent = out.parent if str(out.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    except OSError as e:
+        raise OutputError(f"{out}: cannot create the output folder ({e.strerror})") from None
+    try:
+        write(stage)
         if not out.exists():
             os.replace(stage, out)
         else:
@@ -196,6 +209,151 @@ def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=N
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     return out
+
+
+# ------------------------------------------------------------------ collapsed core
+
+#: ``model.json``'s ``core`` for fits of :func:`bayeshopf.posterior.fit_hybrid`.
+COLLAPSED_CORE = "collapsed"
+
+
+def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
+    """The ``summary.json`` content of a :class:`~bayeshopf.posterior.HybridPosterior`."""
+    ppc = post.ppc() if ppc is None else ppc
+    diag = post.diagnostics
+    errors = {e["name"]: e for e in diag["fit"]["orbit_error"]}
+    f = post.features
+    recs = []
+    for i, name in enumerate(f.names):
+        recs.append({
+            "file": name, "mu": float(f.mu[i]),
+            "branch": "unstable" if f.unstable[i] else "stable",
+            "amplitude": float(f.amplitude[i]), "amplitude_sd": float(f.amplitude_sd[i]),
+            "n_segments": int(f.n_segments[i]),
+            "predicted": ppc.predictive[i].to_json(), "curve": ppc.curve[i].to_json(),
+            "inside_ci90": bool(ppc.covered[i]),
+            "frequency_hz": float(f.frequency_hz[i]),
+            "orbit_error": {k: errors[name][k] for k in ("relative", "spread", "ok")},
+        })
+
+    def iv(name):
+        v = post.interval(name)
+        return None if v is None else v.to_json()
+
+    out = {
+        "core": COLLAPSED_CORE,
+        "mu0": iv("mu0"), "a2": iv("a2"), "a4": iv("a4"), "mu_fold": iv("mu_fold"),
+        "w_unfold": iv("w_unfold"),
+        "criticality": post.criticality, "unfolding": post.spec.unfolding,
+        "mu_label": post.mu_label, "mu_units": post.mu_units,
+        "amplitude_units": post.amplitude_units,
+        "amplitude_definition": "peak-to-peak of z1 over the orbit, from its K-harmonic "
+        "reconstruction",
+        "planar_channels": list(post.spec.frame.names),
+        "recordings": recs,
+        "orbit_error": [errors[n] for n in f.names],
+        "ppc": {"amplitudes_inside_ci90": int(ppc.covered.sum()),
+                "n_recordings": int(ppc.covered.size),
+                "coefficients_inside_ci90": ppc.coeff_coverage},
+        "map": {k: _finite_or_none(float(np.asarray(post.map_point.params[k])))
+                for k in ("mu0", "a2", "a4", "mu_fold", "w_unfold")
+                if k in post.map_point.params},
+        "diagnostics": diag,
+        "seed": post.seed,
+        "settings": dict(post.settings.__dict__),
+        "n_draws": int(np.shape(post.samples["mu0"])[0]),
+        "timings_s": {k: round(v, 3) for k, v in post.timings.items()},
+        "bayeshopf_version": bayeshopf.__version__,
+    }
+    if extra:
+        out.update(extra)
+    return out
+
+
+def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figures=None,
+                ppc=None, extra_summary: dict | None = None) -> Path:
+    """Write a collapsed-core fit folder atomically (as :func:`save_fit`).
+
+    ``posterior.nc`` holds the draws by chain of every site and the map's
+    coefficients ``beta`` (one exact draw per posterior draw); ``model.json``
+    the model structure and the predictive standard errors of a new recording.
+    """
+    def write(stage: Path) -> None:
+        nonlocal post
+        post = replace(post, timings={**post.timings, **_draw_figures(figures, stage)})
+        _write_json(summary_hybrid(post, ppc, extra_summary), stage / SUMMARY)
+        model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
+                 "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),
+                 "seed": post.seed}
+        _write_json(model, stage / MODEL)
+        chains = {k: v for k, v in post.run.chains.items() if not k.startswith("marginal")}
+        n_chain, n_draw = next(iter(chains.values())).shape[:2]
+        chains["beta"] = post.run.betas.reshape((n_chain, n_draw) + post.run.betas.shape[1:])
+        import arviz as az
+
+        idata = az.from_dict(
+            posterior=chains,
+            observed_data={"coeffs": post.features.coeffs},
+            constant_data={"mu": post.features.mu,
+                           "unstable": post.features.unstable.astype(int),
+                           "coeffs_se": post.features.coeffs_se},
+            attrs={"criticality": post.criticality, "seed": post.seed,
+                   "bayeshopf_version": bayeshopf.__version__},
+        )
+        arviz_io.write_netcdf(idata, stage / POSTERIOR)
+
+    return _staged(out, force, write)
+
+
+@dataclass(frozen=True)
+class SavedHybrid:
+    """A collapsed-core fit read back from its folder.
+
+    Attributes:
+        folder: Where it was read from.
+        spec: The model structure.
+        samples: Posterior draws of every site (``beta``: the map's coefficients).
+        summary: The content of ``summary.json``.
+        predictive_se: Standard errors of a new recording's coefficients.
+    """
+
+    folder: Path
+    spec: object
+    samples: dict
+    summary: dict
+    predictive_se: np.ndarray
+
+    def _draws(self, mu: float, branch: str, predictive: bool) -> np.ndarray:
+        from bayeshopf import posterior as bp
+
+        idx = bp.draw_indices(len(self.samples["beta"]))   # the draws the summary used
+        s = {k: v[idx] for k, v in self.samples.items()}
+        theta = {k: v for k, v in s.items() if k != "beta"}
+        c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp._sign(branch))
+        if predictive:
+            rng = np.random.default_rng(int(self.summary.get("seed", 0)))
+            sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
+            c = c + sd * rng.standard_normal(c.shape)
+        return bp.amplitude_of(self.spec, c)[:, 0]
+
+    def predict(self, mu: float, branch: str = "stable", predictive: bool = False) -> Interval:
+        """Amplitude median and 90% interval at μ on ``branch``.
+
+        Raises:
+            DataError: When the branch does not exist at μ in any posterior draw.
+        """
+        draws = self._draws(mu, branch, predictive)
+        if not np.isfinite(draws).any():
+            raise DataError(
+                f"--mu {mu:g}: the {branch} branch does not exist there in any posterior "
+                f"draw (Hopf point μ0 ≈ {np.median(self.samples['mu0']):.4g}"
+                + (f", fold ≈ {self.summary['mu_fold']['median']:.4g}"
+                   if self.summary.get("mu_fold") else "") + ")")
+        return interval(draws)
+
+    def p_exists(self, mu: float, branch: str = "stable") -> float:
+        """Posterior probability that ``branch`` exists at μ."""
+        return float(np.isfinite(self._draws(mu, branch, False)).mean())
 
 
 @dataclass(frozen=True)
@@ -250,11 +408,19 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
             raise DataError(f"{folder}: expected {name} in a fit folder; not found")
     try:
         summary = json.loads((folder / SUMMARY).read_text())
-        spec = ModelSpec.from_dict(json.loads((folder / MODEL).read_text()))
+        model = json.loads((folder / MODEL).read_text())
+        if model.get("core") == COLLAPSED_CORE:
+            from bayeshopf.model.collapsed import CollapsedSpec
+
+            spec = CollapsedSpec.from_dict(model["spec"])
+        else:
+            spec = ModelSpec.from_dict(model)
     except (ValueError, KeyError, TypeError) as e:
         raise DataError(f"{folder}: summary.json or model.json is not readable ({e})") from None
     try:
         samples, _ = arviz_io.read_posterior(folder / POSTERIOR)
     except Exception as e:  # netCDF/HDF5 raise many types
         raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
+    if model.get("core") == COLLAPSED_CORE:
+        return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]))
     return SavedFit(folder, spec, samples, summary)

@@ -155,7 +155,7 @@ def test_help_everywhere(capsys):
 def fitted(good_data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fit") / "out"
     assert main(["fit", str(good_data), "--out", str(out), "--fast", "--quiet", "--seed", "1",
-                 "--nuts-check"]) == 0
+                 "--inference", "svi", "--nuts-check"]) == 0
     return out
 
 
@@ -170,9 +170,19 @@ def test_fit_writes_summary_posterior_figures(fitted, good_data):
     for r in s["recordings"]:
         assert set(r) >= {"file", "mu", "branch", "amplitude", "predicted"}
         assert r["predicted"]["ci90"][0] <= r["predicted"]["median"] <= r["predicted"]["ci90"][1]
-    chk = s["nuts_check"]  # --nuts-check: 2 short chains (30 + 30) in --fast mode
-    assert len(chk["chains"]["mu0"]) == 2 and len(chk["divergences"]) == 2
-    assert chk["mixed"] == (chk["max_rhat"] < 1.05)
+    assert s["core"] == "collapsed"
+    # --inference svi --nuts-check: SVI's intervals against NUTS on the same model
+    chk = s["nuts_check"]
+    assert set(chk["sites"]) == {"mu0", "a2", "mu_fold"}
+    for v in chk["sites"].values():
+        gap = max(abs(a - b) for a, b in zip(v["reference"], v["other"], strict=True))
+        assert v["end_gap_fraction"] == pytest.approx(
+            gap / (v["reference"][1] - v["reference"][0]))
+        assert v["agree"] == (v["end_gap_fraction"] <= 0.25)
+    diag = s["diagnostics"]
+    assert diag["posterior"]["method"] == "svi" and "elbo_plateau" in diag["posterior"]
+    assert [e["name"] for e in s["orbit_error"]] == [r["file"] for r in s["recordings"]]
+    assert all(set(r["orbit_error"]) == {"relative", "spread", "ok"} for r in s["recordings"])
     assert (fitted / "posterior.nc").stat().st_size > 1000
     pngs = sorted(p.name for p in (fitted / "figures").glob("*.png"))
     assert pngs == ["bifurcation.png", "phase_portraits.png", "ppc.png"]
@@ -211,8 +221,16 @@ def test_predict_missing_fit_folder(tmp_path, capsys):
     assert "summary.json" in capsys.readouterr().err
 
 
+def test_legacy_options_on_the_collapsed_core_are_one_line_errors(good_data, tmp_path, capsys):
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--speed", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--core legacy" in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_exact_loo_needs_criticality_auto(good_data, tmp_path, capsys):
-    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--exact-loo", "--quiet"])
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--exact-loo", "--quiet",
+                 "--core", "legacy"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "--criticality auto" in err and "got --criticality sub" in err

@@ -37,6 +37,14 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    "agree with each other and with the SVI bands (summary.json 'nuts_check'); "
                    "with --fast: 2 chains of 30 + 30 steps, a smoke test only")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--core", choices=("collapsed", "legacy"), default="collapsed",
+                   help="inference core: 'collapsed' (default: the map integrated out "
+                   "exactly, NUTS on the normal form and hyperparameters) or 'legacy' "
+                   "(R(θ) features, MAP and SVI over every weight; needed by --speed, "
+                   "--criticality auto and --exact-loo)")
+    p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
+                   help="posterior of the collapsed core: NUTS (default) or SVI with a "
+                   "full-rank Gaussian guide")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -105,7 +113,7 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
         print(textwrap.fill(evidence["statement"], 88))
     hdr = f"{'':8s} {'median':>10s} {'90% interval':>24s}" + (f" {'true':>10s}" if truth else "")
     print(hdr)
-    for k in ("mu0", "a2", "a4", "mu_fold"):
+    for k in ("mu0", "a2", "a4", "mu_fold", "w_unfold"):
         v = summary.get(k)
         if v is None:
             continue
@@ -113,7 +121,7 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
             print(f"{k:8s} {v['median']:10.4g}   (fixed by the supercritical gauge; a4 is free)")
             continue
         t = "" if not truth or truth.get(k) is None else f" {truth[k]:10.4g}"
-        unit = "" if k in ("a2", "a4") else f" {u}"
+        unit = "" if k in ("a2", "a4", "w_unfold") else f" {u}"
         print(f"{k:8s} {v['median']:10.4g} [{v['ci90'][0]:10.4g}, {v['ci90'][1]:10.4g}]{t}{unit}")
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
@@ -128,12 +136,39 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
           f"their 90% predictive intervals; {100 * ppc['coefficients_inside_ci90']:.0f}% of the "
           "Fourier coefficients inside theirs.")
     _print_nuts_check(summary)
+    _print_diagnostics(summary)
+
+
+def _print_diagnostics(summary: dict) -> None:
+    """Convergence line and one warning line per failed check (collapsed core)."""
+    diag = summary.get("diagnostics")
+    if not diag:
+        return
+    post = diag.get("posterior", {})
+    if post.get("method") == "nuts" and post.get("sites"):
+        worst = max(v["r_hat"] for v in post["sites"].values())
+        ess = min(v["ess_bulk"] for v in post["sites"].values())
+        print(f"\nNUTS, {post['chains']} chains: R̂ ≤ {worst:.3f}, bulk ESS ≥ {ess:.0f} for "
+              f"{', '.join(post['sites'])}; {post['divergences']} divergences")
+    errs = [e["relative"] for e in diag["fit"]["orbit_error"] if e["relative"] is not None]
+    if errs:
+        print(f"orbit errors (posterior-median orbit against the measured mean orbit): "
+              f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
+    for w in diag.get("warnings", []):
+        print(f"warning: {w}")
 
 
 def _print_nuts_check(summary: dict) -> None:
     """One line on the NUTS check, when the summary has one."""
     chk = summary.get("nuts_check")
     if chk is None:
+        return
+    if "sites" in chk:  # collapsed core: SVI against NUTS on the same model
+        for k, v in chk["sites"].items():
+            lo, hi = v["reference"]
+            print(f"NUTS check {k}: NUTS [{lo:.4g}, {hi:.4g}], SVI [{v['other'][0]:.4g}, "
+                  f"{v['other'][1]:.4g}]: ends differ by {100 * v['end_gap_fraction']:.0f}% of "
+                  f"NUTS's width ({'agree' if v['agree'] else 'DISAGREE'})")
         return
     med = [c["median"] for c in chk["chains"]["mu0"]]
     lo, hi = summary["mu0"]["ci90"]
@@ -147,7 +182,50 @@ def _print_nuts_check(summary: dict) -> None:
           f"SVI 90% band [{lo:.4g}, {hi:.4g}] {u}")
 
 
+def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
+    """``fit``/``demo`` on the collapsed core (:func:`bayeshopf.posterior.fit_hybrid`)."""
+    from dataclasses import replace
+
+    from bayeshopf import report
+    from bayeshopf.errors import FitError
+    from bayeshopf.inference.collapsed import CollapsedSettings
+    from bayeshopf.posterior import fit_hybrid
+
+    for flag, used in (("--speed", getattr(args, "speed", False)),
+                       ("--criticality auto", criticality == "auto"),
+                       ("--exact-loo", getattr(args, "exact_loo", False))):
+        if used:
+            raise FitError(f"{flag} runs on the legacy core; expected --core legacy with it, "
+                           "got --core collapsed")
+    report.check_output_folder(out, args.force)
+    progress = not args.quiet
+    t0 = time.perf_counter()
+    settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
+    settings = replace(settings, inference=args.inference)
+    post = fit_hybrid(rs, criticality, seed=args.seed, settings=settings, progress=progress)
+    if getattr(args, "nuts_check", False) and args.inference == "svi":
+        from bayeshopf.inference.collapsed import compare_with_nuts
+
+        extra = {**(extra or {}), "nuts_check": compare_with_nuts(post, seed=args.seed,
+                                                                  progress=progress)}
+    ppc = post.ppc()
+    figures = None
+    if not args.no_figures:
+        from bayeshopf.plotting import plot_all
+
+        def figures(folder):
+            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None)
+
+    report.save_hybrid(post, out, force=args.force, figures=figures, ppc=ppc,
+                       extra_summary=extra)
+    summary = json.loads((Path(out) / report.SUMMARY).read_text())
+    summary["total_s"] = time.perf_counter() - t0
+    return summary
+
+
 def _run_fit(rs, criticality, args, out, truth=None, extra=None):
+    if getattr(args, "core", "collapsed") == "collapsed":
+        return _run_hybrid(rs, criticality, args, out, truth, extra)
     from bayeshopf import report
     from bayeshopf.pipeline import fit, fit_auto, with_timings
 

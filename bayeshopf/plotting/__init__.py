@@ -6,7 +6,8 @@ a :class:`~bayeshopf.diagnostics.ppc.PosteriorPredictiveCheck`, ...) and returns
 a new :class:`matplotlib.figure.Figure` that is not registered with pyplot, so
 no global matplotlib state (current figure, rcParams) is read or changed.
 :func:`save_figure` writes a figure atomically and :func:`plot_all` draws the
-standard set of a :class:`~bayeshopf.pipeline.HopfFit`.
+standard set of a fit (:class:`~bayeshopf.posterior.HybridPosterior`, or the legacy
+:class:`~bayeshopf.pipeline.HopfFit`).
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ def diagram_grid(fit, n: int = 100, n_refine: int = 25) -> np.ndarray:
         n: Points of the uniform base grid (:func:`default_mu_grid`).
         n_refine: Extra points about each of the Hopf and fold points.
     """
-    base = default_mu_grid(fit.spec, fit.samples, n)
+    base = (fit.default_mu_grid(n) if hasattr(fit, "default_mu_grid")
+            else default_mu_grid(fit.spec, fit.samples, n))
     step = float(base[1] - base[0])
     extra = []
     for name in ("mu0", "mu_fold"):
@@ -120,7 +122,8 @@ def plot_all(
             amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
             zoom=default_zoom(fit, mu) if zoom else None,
         ),
-        plot_phase_portraits(fit.samples, fit.spec, recordings, truth=orbit_truth),
+        plot_phase_portraits(fit.samples, fit.spec, recordings, truth=orbit_truth,
+                             orbits=getattr(fit, "orbits", None)),
         plot_ppc(ppc, amplitude_units=fit.amplitude_units, amplitude_label=amp_label),
     ]
     return [save_figure(fig, out / name, dpi=dpi)

@@ -63,6 +63,7 @@ def plot_phase_portraits(
     max_points: int = 4000,
     truth: OrbitTruth | None = None,
     mu_symbol: str = "μ",
+    orbits: OrbitTruth | None = None,
 ) -> Figure:
     """Plot each recording's measured orbit over the posterior predicted orbits.
 
@@ -82,6 +83,9 @@ def plot_phase_portraits(
         truth: Optional ``truth(mu, branch) -> points (n, 2)``, drawn as a thin
             black dashed closed curve.
         mu_symbol: Symbol of μ in the panel titles.
+        orbits: Optional ``orbits(mu, branch) -> draws (n, n_phi, 2)`` of the
+            posterior orbits in physical units; by default they come from
+            ``samples`` and ``spec`` (the legacy core).
 
     Returns:
         The figure, one axes per recording.
@@ -108,7 +112,8 @@ def plot_phase_portraits(
         ax.plot(measured[:, 0], measured[:, 1], color=MEASURED_GREY, lw=0.5, alpha=0.8, zorder=1,
                 gid="measured")
 
-        draws = np.asarray(orbit_draws(samples, spec, rec.mu, sign), float)
+        draws = np.asarray(orbit_draws(samples, spec, rec.mu, sign) if orbits is None
+                           else orbits(rec.mu, rec.branch), float)
         exists = np.all(np.isfinite(draws), axis=(1, 2))
         draws = draws[exists]
         if draws.shape[0]:

@@ -112,7 +112,14 @@ def plot_ppc(
     n_rec, n_c = z.shape
     im = ax_b.imshow(np.clip(z, -Z_CLIP, Z_CLIP), cmap="RdBu_r", vmin=-Z_CLIP, vmax=Z_CLIP,
                      aspect="auto", interpolation="nearest", gid="coeff-z")
-    ax_b.set_xticks(np.arange(n_c), coefficient_labels(n_c), fontsize=TICK_SIZE - 1)
+    if n_c % 2:  # R(θ) coefficients (legacy core)
+        labels, what = coefficient_labels(n_c), "Fourier coefficient of R(θ)"
+    else:        # time-harmonic coefficients of two channels (collapsed core)
+        half = coefficient_labels(n_c // 2)
+        labels = [f"{c}:{k}" for c in ("z1", "z2") for k in half]
+        what = "time-Fourier coefficient of z1, z2 (phase-aligned)"
+    ax_b.set_xticks(np.arange(n_c), labels, fontsize=TICK_SIZE - 1,
+                    rotation=90 if n_c > 12 else 0)
     ax_b.set_yticks(np.arange(n_rec), list(ppc.names), fontsize=TICK_SIZE - 1)
     ax_b.tick_params(length=0)
     ax_b.set_xticks(np.arange(-0.5, n_c), minor=True)
@@ -121,7 +128,7 @@ def plot_ppc(
     ax_b.tick_params(which="minor", length=0)
     for spine in ax_b.spines.values():
         spine.set_visible(False)
-    ax_b.set_xlabel("Fourier coefficient of R(θ)", fontsize=LABEL_SIZE)
+    ax_b.set_xlabel(what, fontsize=LABEL_SIZE)
     ax_b.set_title("(b) standardised coefficient residuals", fontsize=TITLE_SIZE, loc="left")
     cbar = fig.colorbar(im, ax=ax_b, extend="both", shrink=0.9, pad=0.02)
     cbar.set_label(r"$(\Phi - \mathrm{mean}\,\tilde{\Phi})\,/\,\mathrm{sd}\,\tilde{\Phi}$",

@@ -1,0 +1,256 @@
+r"""Time-Fourier coefficients of each channel over a common phase origin.
+
+The data side of the collapsed model (:mod:`bayeshopf.model.collapsed`). Each
+recording is put in the common affine :class:`~bayeshopf.features.frame.PlanarFrame`
+``w = L⁻¹(z − c)`` (no polar form, so an orbit need not encircle anything), cut
+into segments of a few periods, and each segment's channels are fitted by least
+squares with ``K`` harmonics of the record's frequency ω,
+
+.. math::  w_c(t) \approx a_{c,0} + \sum_{k=1}^{K} a_{c,k}\cos k\omega t
+           + b_{c,k}\sin k\omega t .
+
+The time origin of every segment is then moved to the crest of the first
+channel's fundamental (``b_{1,1} = 0``, ``a_{1,1} > 0``), which rotates the
+harmonic ``k`` of both channels by ``k`` times the same phase. In normal-form
+coordinates the LCO is the circle ``r(cos ωt, sin ωt)`` traversed at constant
+speed (the rotational symmetry of the Hopf normal form), so these coefficients
+are the map applied to a uniformly sampled circle, and they are linear in the
+map's linear coefficients.
+
+Each datum is the mean over segments; its measurement error is the standard
+error of that mean (the spread over segments divided by √n), and never less
+than the least-squares standard error of the whole record, which is also the
+error of a record too short to cut (a single segment).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.errors import DataError
+from bayeshopf.features.frame import PlanarFrame
+
+#: Default harmonics per channel. The rig's second harmonic is about 4% of the
+#: fundamental in pitch; above the fourth they sit at the noise floor.
+DEFAULT_HARMONICS = 4
+#: Default segment length in periods.
+DEFAULT_SEGMENT_PERIODS = 5.0
+#: Fewest segments from which a spread (and so a standard error) is taken.
+MIN_SEGMENTS_FOR_SPREAD = 4
+
+
+def n_coefficients(n_harmonics: int) -> int:
+    """``2K + 1`` coefficients per channel: ``[a_0, a_1..a_K, b_1..b_K]``."""
+    return 2 * n_harmonics + 1
+
+
+def time_design(t, omega: float, n_harmonics: int) -> np.ndarray:
+    """Columns ``[1, cos ωt, …, cos Kωt, sin ωt, …, sin Kωt]``, shape ``(n_t, 2K+1)``."""
+    kt = np.asarray(t)[:, None] * omega * np.arange(1, n_harmonics + 1)
+    return np.concatenate([np.ones((kt.shape[0], 1)), np.cos(kt), np.sin(kt)], axis=1)
+
+
+def phase_design(phi, n_harmonics: int) -> np.ndarray:
+    """The same columns at phases φ (``time_design(φ, 1, K)``)."""
+    return time_design(np.asarray(phi), 1.0, n_harmonics)
+
+
+def shift_origin(coeffs: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """Coefficients of ``w(t + phase/ω)``: harmonic ``k`` rotated by ``k·phase``.
+
+    Args:
+        coeffs: Shape ``(..., n_channels, 2K+1)``.
+        phase: Shape ``(...)``, radians of the fundamental.
+    """
+    K = (coeffs.shape[-1] - 1) // 2
+    a, b = coeffs[..., 1 : K + 1], coeffs[..., K + 1 :]
+    kp = np.asarray(phase)[..., None, None] * np.arange(1, K + 1)
+    c, s = np.cos(kp), np.sin(kp)
+    # x = Re Σ (a_k − i b_k) e^{ik ωt}; t → t + φ/ω multiplies by e^{ikφ}
+    return np.concatenate([coeffs[..., :1], a * c + b * s, b * c - a * s], axis=-1)
+
+
+def align(coeffs: np.ndarray) -> np.ndarray:
+    """Move the time origin to the crest of channel 0's fundamental (``b_{0,1} = 0``)."""
+    K = (coeffs.shape[-1] - 1) // 2
+    phase = np.arctan2(coeffs[..., 0, K + 1], coeffs[..., 0, 1])
+    return shift_origin(coeffs, phase)
+
+
+def reconstruct(coeffs, phi) -> np.ndarray:
+    """Orbit points at phases φ from coefficients ``(..., n_ch, 2K+1)``: shape ``(..., n_phi, n_ch)``."""
+    K = (np.shape(coeffs)[-1] - 1) // 2
+    return np.einsum("pk,...ck->...pc", phase_design(phi, K), coeffs)
+
+
+def _frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
+    """Fundamental angular frequency: the periodogram's peak, refined by least squares."""
+    x = w - w.mean(axis=0)
+    n = t.size
+    dt = (t[-1] - t[0]) / (n - 1)
+    spec = np.sum(np.abs(np.fft.rfft(x * np.hanning(n)[:, None], axis=0)) ** 2, axis=1)
+    spec[0] = 0.0
+    k = int(np.argmax(spec))
+    if k < 1 or spec[k] <= 0:
+        raise DataError(f"{where}: an oscillation expected; found no spectral peak")
+    f0 = k / (n * dt)
+    df = 1.0 / (n * dt)
+
+    def residual(f):
+        A = time_design(t - t[0], 2 * np.pi * f, 1)
+        return float(np.sum((x - A @ np.linalg.lstsq(A, x, rcond=None)[0]) ** 2))
+
+    res = minimize_scalar(residual, bounds=(max(f0 - df, 0.5 * f0), f0 + df), method="bounded",
+                          options={"xatol": 1e-6 * f0})
+    return 2 * np.pi * float(res.x)
+
+
+@dataclass(frozen=True)
+class HarmonicFeatures:
+    """Phase-aligned time-Fourier coefficients of every recording (immutable).
+
+    Attributes:
+        mu: μ of each recording, ``(n_rec,)``.
+        unstable: Branch mask, ``(n_rec,)``.
+        coeffs: Mean aligned coefficients in the frame, ``(n_rec, 2, 2K+1)``.
+        coeffs_se: Their standard errors, same shape.
+        segment_rms: RMS distance of the segments' orbits from the mean orbit
+            (frame units), ``(n_rec,)``; 0 for a single segment.
+        n_segments: Segments per recording.
+        omega: Angular frequency (rad/s) per recording.
+        omega_se: Its standard error (from the segments, or 0 for one segment).
+        amplitude: Peak-to-peak of z1 of the mean orbit (z1's unit).
+        amplitude_sd: Spread of the segments' amplitudes.
+        frame: The common planar frame.
+        n_harmonics: K.
+        names: Recording names.
+    """
+
+    mu: np.ndarray
+    unstable: np.ndarray
+    coeffs: np.ndarray
+    coeffs_se: np.ndarray
+    segment_rms: np.ndarray
+    n_segments: np.ndarray
+    omega: np.ndarray
+    omega_se: np.ndarray
+    amplitude: np.ndarray
+    amplitude_sd: np.ndarray
+    frame: PlanarFrame
+    n_harmonics: int
+    names: tuple[str, ...]
+
+    @property
+    def n_recordings(self) -> int:
+        """Number of recordings."""
+        return int(self.mu.size)
+
+    @property
+    def frequency_hz(self) -> np.ndarray:
+        """``ω/2π`` per recording."""
+        return self.omega / (2 * np.pi)
+
+    def subset(self, indices) -> HarmonicFeatures:
+        """Features of the recordings at ``indices`` (frame kept)."""
+        idx = np.asarray(indices)
+        arrays = {k: getattr(self, k)[idx] for k in (
+            "mu", "unstable", "coeffs", "coeffs_se", "segment_rms", "n_segments", "omega",
+            "omega_se", "amplitude", "amplitude_sd")}
+        return HarmonicFeatures(**arrays, frame=self.frame, n_harmonics=self.n_harmonics,
+                                names=tuple(self.names[i] for i in idx))
+
+    def orbit(self, n_phi: int = 128) -> np.ndarray:
+        """Mean orbits in the frame at uniform phases, ``(n_rec, n_phi, 2)``."""
+        return reconstruct(self.coeffs, np.linspace(0, 2 * np.pi, n_phi, endpoint=False))
+
+
+def _amplitude(coeffs, frame: PlanarFrame, n_phi: int = 256) -> np.ndarray:
+    w = reconstruct(coeffs, np.linspace(0, 2 * np.pi, n_phi, endpoint=False))
+    z1 = frame.from_frame(w)[..., 0]
+    return z1.max(axis=-1) - z1.min(axis=-1)
+
+
+def extract_harmonics(
+    rs: RecordingSet,
+    *,
+    n_harmonics: int = DEFAULT_HARMONICS,
+    segment_periods: float = DEFAULT_SEGMENT_PERIODS,
+    frame: PlanarFrame | None = None,
+) -> HarmonicFeatures:
+    """Phase-aligned harmonic coefficients of every recording (module docstring).
+
+    Args:
+        rs: The recordings; their planar pair (z1, z2) is used.
+        n_harmonics: Harmonics K per channel.
+        segment_periods: Segment length in periods.
+        frame: Frame to use (a fit's, for new recordings); by default the one
+            :meth:`PlanarFrame.from_orbits` builds from ``rs``.
+
+    Returns:
+        The :class:`HarmonicFeatures`.
+
+    Raises:
+        DataError: If a record holds less than one period or fewer samples than
+            ``4(2K+1)``.
+    """
+    if n_harmonics < 1:
+        raise DataError(f"n_harmonics must be a positive integer; got {n_harmonics}")
+    orbits = [r.planar(rs.planar) for r in rs]
+    if frame is None:
+        frame = PlanarFrame.from_orbits(orbits, rs.planar, rs.units)
+    n_c = n_coefficients(n_harmonics)
+    out = {k: [] for k in ("c", "se", "rms", "nseg", "om", "om_se", "amp", "amp_sd")}
+    phi = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+    for rec, z in zip(rs, orbits, strict=True):
+        w = frame.to_frame(z)
+        t = rec.t - rec.t[0]
+        if t.size < 4 * n_c:
+            raise DataError(f"{rec.name}: at least {4 * n_c} samples expected for "
+                            f"{n_harmonics} harmonics; found {t.size}")
+        omega = _frequency(t, w, rec.name)
+        if omega * rec.duration < 2 * np.pi:
+            raise DataError(f"{rec.name}: at least one period expected; found "
+                            f"{omega * rec.duration / (2 * np.pi):.2f} periods")
+        seg_len = max(int(round(segment_periods * 2 * np.pi / omega / rec.dt)), 4 * n_c)
+        n_seg = max(1, t.size // seg_len)
+        seg, seg_om = [], []
+        for s in range(n_seg):
+            sl = slice(s * seg_len, (s + 1) * seg_len if s < n_seg - 1 else t.size)
+            A = time_design(t[sl], omega, n_harmonics)
+            seg.append(np.linalg.lstsq(A, w[sl], rcond=None)[0].T)
+            if n_seg > 1:  # the segment's own frequency, for the frequency's spread
+                seg_om.append(_frequency(t[sl], w[sl], rec.name))
+        seg = align(np.array(seg))
+        mean = seg.mean(axis=0)
+        # least-squares standard error of the whole record (white-noise floor)
+        A = time_design(t, omega, n_harmonics)
+        whole = np.linalg.lstsq(A, w, rcond=None)[0]
+        dof = max(t.size - n_c, 1)
+        s2 = np.sum((w - A @ whole) ** 2, axis=0) / dof
+        se_ls = np.sqrt(np.outer(s2, np.diag(np.linalg.inv(A.T @ A))))
+        if n_seg >= MIN_SEGMENTS_FOR_SPREAD:
+            se = np.maximum(seg.std(axis=0, ddof=1) / np.sqrt(n_seg), se_ls)
+        else:
+            se = se_ls
+        orbit_mean = reconstruct(mean, phi)
+        dev = reconstruct(seg, phi) - orbit_mean
+        out["c"].append(mean)
+        out["se"].append(se)
+        out["rms"].append(float(np.sqrt(np.mean(np.sum(dev**2, axis=-1)))) if n_seg > 1 else 0.0)
+        out["nseg"].append(n_seg)
+        out["om"].append(omega)
+        out["om_se"].append(float(np.std(seg_om, ddof=1) / np.sqrt(n_seg)) if n_seg > 1 else 0.0)
+        out["amp"].append(float(_amplitude(mean, frame)))
+        out["amp_sd"].append(float(_amplitude(seg, frame).std(ddof=1)) if n_seg > 1 else 0.0)
+    return HarmonicFeatures(
+        mu=rs.mus, unstable=rs.is_unstable, coeffs=np.array(out["c"]),
+        coeffs_se=np.array(out["se"]), segment_rms=np.array(out["rms"]),
+        n_segments=np.array(out["nseg"]), omega=np.array(out["om"]),
+        omega_se=np.array(out["om_se"]), amplitude=np.array(out["amp"]),
+        amplitude_sd=np.array(out["amp_sd"]), frame=frame, n_harmonics=n_harmonics,
+        names=tuple(rs.names),
+    )

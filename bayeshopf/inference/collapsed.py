@@ -1,0 +1,375 @@
+"""Inference on the collapsed model: deterministic start, MAP, then NUTS or SVI.
+
+With the map integrated out (:mod:`bayeshopf.model.collapsed`) the posterior is
+over a handful of parameters: the normal form's gaps (and the unfolding's ``w``),
+``τ_μ``, ``τ_s`` and one model error per channel. The stages:
+
+1. **Start.** A grid over the two gaps (fractions of Δμ), the hyperparameters
+   at their prior medians; the grid point with the highest log joint is kept.
+   Nothing is random, so the answer does not depend on which start won.
+2. **MAP** by optax's L-BFGS from that point, in NumPyro's unconstrained space,
+   until the gradient norm falls below :data:`MAP_GTOL`; the final norm is
+   reported.
+3. **Posterior.** ``"nuts"`` (default): NumPyro's NUTS, ``num_chains`` chains
+   started at the MAP point, with R̂ and bulk ESS per site from ArviZ.
+   ``"svi"``: a full-rank Gaussian autoguide started at the MAP point, with an
+   ELBO-plateau test.
+4. **Map draws.** For every posterior draw, one exact draw of the map's linear
+   coefficients from their Gaussian conditional.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+import time
+from dataclasses import dataclass, field
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jax.flatten_util import ravel_pytree
+from numpyro.infer import MCMC, NUTS, SVI, Trace_ELBO, init_to_value
+from numpyro.infer.autoguide import AutoMultivariateNormal
+from numpyro.infer.util import initialize_model
+
+from bayeshopf.errors import FitError
+from bayeshopf.features.harmonics import HarmonicFeatures
+from bayeshopf.model import collapsed as cm
+
+#: Gradient norm (unconstrained space) below which the MAP counts as converged.
+MAP_GTOL = 1e-4
+#: R̂ above which a site counts as not converged.
+RHAT_MAX = 1.01
+#: Bulk ESS below which a site counts as not converged.
+ESS_MIN = 400
+#: Sites whose convergence is checked and reported.
+CHECKED = ("mu0", "a2", "mu_fold", "a4", "w_unfold")
+#: Grid of the deterministic start, as fractions of Δμ for both gaps.
+START_GRID = (0.03, 0.1, 0.3, 1.0)
+
+
+@dataclass(frozen=True)
+class CollapsedSettings:
+    """Settings of :func:`fit_collapsed` (the defaults are the documented ones).
+
+    Attributes:
+        n_harmonics: Harmonics per channel of the features.
+        segment_periods: Segment length in periods.
+        nn_width: Hidden units of the map's network.
+        unfolding: ``"curved"`` (default) or ``"linear"`` (the paper's ``μ − μ0``).
+        inference: ``"nuts"`` (default) or ``"svi"``.
+        num_chains: NUTS chains.
+        num_warmup: NUTS warm-up steps per chain.
+        num_samples: NUTS draws per chain.
+        svi_steps: SVI steps (``inference="svi"``).
+        n_svi_draws: Draws of the SVI posterior.
+        lbfgs_steps: Most L-BFGS steps of the MAP.
+    """
+
+    n_harmonics: int = 4
+    segment_periods: float = 5.0
+    nn_width: int = 16
+    unfolding: str = "curved"
+    inference: str = "nuts"
+    num_chains: int = 4
+    num_warmup: int = 500
+    num_samples: int = 500
+    svi_steps: int = 3000
+    n_svi_draws: int = 2000
+    lbfgs_steps: int = 300
+
+    @classmethod
+    def fast(cls) -> CollapsedSettings:
+        """Shorter chains for smoke tests (R̂ and ESS then usually fail their thresholds)."""
+        return cls(num_chains=2, num_warmup=200, num_samples=200, svi_steps=1000,
+                   n_svi_draws=400)
+
+
+def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
+               unfolding: str = "curved", mu_label: str = "mu",
+               mu_units: str = "") -> cm.CollapsedSpec:
+    """Structure and data constants of the collapsed model.
+
+    Raises:
+        FitError: For fewer than two distinct μ, an unknown criticality or
+            unfolding, or unstable recordings under a supercritical model.
+    """
+    if criticality not in ("subcritical", "supercritical"):
+        raise FitError(f"criticality must be 'subcritical' or 'supercritical'; got {criticality!r}")
+    if unfolding not in ("curved", "linear"):
+        raise FitError(f"unfolding must be 'curved' or 'linear'; got {unfolding!r}")
+    mu = features.mu
+    if np.unique(mu).size < 2:
+        raise FitError(f"the fit needs recordings at two or more distinct values of μ; found "
+                       f"{features.n_recordings} recording(s) at μ = {sorted(set(mu.tolist()))}")
+    if criticality == "supercritical" and features.unstable.any():
+        raise FitError("criticality 'supercritical' has no unstable LCO branch, but the data hold "
+                       f"{int(features.unstable.sum())} unstable recording(s)")
+    orbits = features.orbit()
+    rms = np.sqrt(np.mean(np.sum((orbits - orbits.mean(axis=1, keepdims=True)) ** 2, -1), -1))
+    unstable_mu = mu[features.unstable]
+    return cm.CollapsedSpec(
+        criticality=criticality, frame=features.frame, n_harmonics=features.n_harmonics,
+        mu_centre=float(0.5 * (mu.max() + mu.min())), mu_span=float(mu.max() - mu.min()),
+        mu_min=float(mu.min()),
+        mu_unstable_max=float(unstable_mu.max()) if unstable_mu.size else None,
+        orbit_scale=float(np.median(rms)), nn_hidden=cm.hidden_layer(nn_width),
+        mu_label=mu_label, mu_units=mu_units,
+        unfolding=unfolding if criticality == "subcritical" else "linear",
+    )
+
+
+def model_arguments(spec: cm.CollapsedSpec, features: HarmonicFeatures) -> dict:
+    """Keyword arguments of :func:`~bayeshopf.model.collapsed.collapsed_model`."""
+    return dict(spec=spec, mu=jnp.asarray(features.mu),
+                sign=jnp.asarray(np.where(features.unstable, -1.0, 1.0)),
+                coeffs=jnp.asarray(features.coeffs), coeffs_se=jnp.asarray(features.coeffs_se))
+
+
+def _initial_values(spec: cm.CollapsedSpec) -> dict:
+    v = {"tau_mu": cm.TAU_MU_PRIOR[0], "tau_shape": cm.TAU_SHAPE_PRIOR[0],
+         "sigma": np.full(2, 0.5 * cm.SIGMA_PRIOR * spec.orbit_scale),
+         "sigma_rel": 0.5 * cm.SIGMA_REL_PRIOR,
+         "gap_hopf": 0.3 * spec.mu_span}
+    if spec.criticality == "subcritical":
+        v["gap_fold"] = 0.3 * spec.mu_span
+        if spec.unfolding == "curved":
+            v["w_unfold"] = 0.0
+    else:
+        v["kappa"] = 0.3 / spec.mu_span
+    return {k: jnp.asarray(x, dtype=float) for k, x in v.items()}
+
+
+@dataclass(frozen=True)
+class MapPoint:
+    """The MAP stage's result (immutable).
+
+    Attributes:
+        params: Constrained values of every site at the optimum.
+        unconstrained: The optimum in NumPyro's unconstrained space.
+        log_joint: Log joint density there.
+        grad_norm: Gradient norm there (unconstrained space).
+        converged: ``grad_norm < MAP_GTOL``.
+        n_steps: L-BFGS steps taken.
+        start: Constrained values of the deterministic start.
+    """
+
+    params: dict
+    unconstrained: dict
+    log_joint: float
+    grad_norm: float
+    converged: bool
+    n_steps: int
+    start: dict
+
+
+def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
+    """Deterministic start (grid over the gaps), then L-BFGS to the MAP (module docstring)."""
+    spec = kwargs["spec"]
+    init = _initial_values(spec)
+    info = initialize_model(jax.random.PRNGKey(0), cm.collapsed_model, model_kwargs=kwargs,
+                            init_strategy=init_to_value(values=init))
+    z0, unravel = ravel_pytree(info.param_info.z)
+    potential = jax.jit(lambda x: info.potential_fn(unravel(x)))
+    names = ("gap_fold", "gap_hopf") if spec.criticality == "subcritical" else ("gap_hopf",
+                                                                                  "kappa")
+    best = None
+    for g1, g2 in itertools.product(START_GRID, repeat=2):
+        z = dict(info.param_info.z)
+        z[names[0]] = jnp.log(g1 * (spec.mu_span if names[0] != "kappa" else 1 / spec.mu_span))
+        z[names[1]] = jnp.log(g2 * (spec.mu_span if names[1] != "kappa" else 1 / spec.mu_span))
+        x = ravel_pytree(z)[0]
+        v = float(potential(x))
+        if np.isfinite(v) and (best is None or v < best[0]):
+            best = (v, x)
+    if best is None:
+        raise FitError("no start on the grid of gaps gives a finite log density: are the "
+                       "branch labels right (unstable orbits need a fold below them)?")
+    x = best[1]
+    start = {k: np.asarray(v) for k, v in info.postprocess_fn(unravel(x)).items()}
+    opt = optax.lbfgs()
+    value_and_grad = optax.value_and_grad_from_state(potential)
+
+    def cond(carry):
+        _, _, i, g = carry
+        return (i < max_steps) & (jnp.linalg.norm(g) >= MAP_GTOL)
+
+    def body(carry):
+        x, state, i, _ = carry
+        v, g = value_and_grad(x, state=state)
+        updates, state = opt.update(g, state, x, value=v, grad=g, value_fn=potential)
+        return optax.apply_updates(x, updates), state, i + 1, g
+
+    g0 = jax.grad(potential)(x)
+    x, _, n, _ = jax.jit(lambda x: jax.lax.while_loop(cond, body, (x, opt.init(x), 0, g0)))(x)
+    v, g = jax.value_and_grad(potential)(x)
+    gnorm = float(jnp.linalg.norm(g))
+    if not np.isfinite(float(v)):
+        raise FitError("MAP: the log density is not finite at the optimum")
+    z = unravel(x)
+    return MapPoint(
+        params={k: np.asarray(val) for k, val in info.postprocess_fn(z).items()},
+        unconstrained={k: np.asarray(val) for k, val in z.items()},
+        log_joint=-float(v), grad_norm=gnorm, converged=gnorm < MAP_GTOL, n_steps=int(n),
+        start=start,
+    )
+
+
+def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
+    latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
+    mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent)),
+                num_warmup=settings.num_warmup, num_samples=settings.num_samples,
+                num_chains=settings.num_chains, chain_method="vectorized",
+                progress_bar=False)  # numpyro's bar steps in Python: 2–3 times slower
+    mcmc.run(key, **kwargs)
+    chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
+    divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
+    return chains, divergences
+
+
+def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
+    latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
+    guide = AutoMultivariateNormal(cm.collapsed_model, init_loc_fn=init_to_value(values=latent),
+                                   init_scale=0.01)
+    svi = SVI(cm.collapsed_model, guide, optax.adam(5e-3), Trace_ELBO(num_particles=4))
+    k_run, k_draw = jax.random.split(key)
+    res = svi.run(k_run, settings.svi_steps, progress_bar=progress, stable_update=True, **kwargs)
+    draws = guide.sample_posterior(k_draw, res.params, sample_shape=(settings.n_svi_draws,))
+    from numpyro.infer import Predictive
+
+    det = Predictive(cm.collapsed_model, posterior_samples=draws)(k_draw, **kwargs)
+    det = {k: v for k, v in det.items()    # the deterministic sites (μ0, a2, the fold)
+           if k not in draws and not k.startswith("marginal") and np.ndim(v) >= 1}
+    chains = {k: np.asarray(v)[None] for k, v in {**draws, **det}.items()}
+    return chains, np.asarray(res.losses)
+
+
+def elbo_plateau(losses: np.ndarray, frac: float = 0.1) -> dict:
+    """Whether the −ELBO has stopped falling: the last ``frac`` of the steps against the one before.
+
+    Plateau when the mean of the last window is not below the previous window's
+    by more than twice the standard error of their difference.
+    """
+    n = max(int(frac * losses.size), 10)
+    a, b = losses[-2 * n : -n], losses[-n:]
+    diff = float(a.mean() - b.mean())
+    se = float(np.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size))
+    return {"drop": diff, "se": se, "plateau": bool(diff < 2 * se)}
+
+
+def _sample_maps(spec, kwargs, theta: dict, key) -> np.ndarray:
+    """One exact draw of the map's coefficients per posterior draw, ``(n, J, 2)``."""
+    n = len(next(iter(theta.values())))
+    keys = jax.random.split(key, n)
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    # lax.map, not vmap: XLA's batched triangular solves hang on CPU
+    run = jax.jit(lambda th, keys: jax.lax.map(
+        lambda a: cm.draw_map(spec, a[0], kwargs["mu"], kwargs["sign"], kwargs["coeffs"],
+                              kwargs["coeffs_se"], a[1]), (th, keys)))
+    return np.asarray(run(th, keys))
+
+
+def convergence(chains: dict) -> dict:
+    """R̂ and bulk ESS (ArviZ) of the :data:`CHECKED` sites present, with pass flags."""
+    present = {k: v for k, v in chains.items() if k in CHECKED}
+    out = {}
+    if next(iter(present.values())).shape[0] < 2:
+        return out
+    rhat = az.rhat(az.convert_to_dataset(present))
+    ess = az.ess(az.convert_to_dataset(present), method="bulk")
+    for k in present:
+        r, e = float(rhat[k]), float(ess[k])
+        out[k] = {"r_hat": r, "ess_bulk": e, "ok": bool(r <= RHAT_MAX and e >= ESS_MIN)}
+    return out
+
+
+@dataclass(frozen=True)
+class PosteriorRun:
+    """The posterior stage's raw result (immutable).
+
+    Attributes:
+        method: ``"nuts"`` or ``"svi"``.
+        chains: Draws of every site, ``(n_chains, n_draws, ...)`` (SVI: one chain).
+        betas: Map coefficients, one exact draw per posterior draw, ``(n, J, 2)``.
+        divergences: NUTS divergent transitions (0 for SVI).
+        losses: SVI −ELBO per step (empty for NUTS).
+        seconds: Wall time of the stage.
+    """
+
+    method: str
+    chains: dict
+    betas: np.ndarray
+    divergences: int = 0
+    losses: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    seconds: float = 0.0
+
+    @property
+    def samples(self) -> dict:
+        """Draws with the chains pooled, leading axis ``n``."""
+        return {k: v.reshape((-1,) + v.shape[2:]) for k, v in self.chains.items()}
+
+
+def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSettings, *,
+                     seed: int = 0, progress: bool = True, method: str | None = None
+                     ) -> PosteriorRun:
+    """NUTS or SVI from the MAP point, then one exact map draw per posterior draw."""
+    method = method or settings.inference
+    if method not in ("nuts", "svi"):
+        raise FitError(f"inference must be 'nuts' or 'svi'; got {method!r}")
+    k_post, k_map = jax.random.split(jax.random.PRNGKey(seed))
+    t0 = time.perf_counter()
+    if progress:
+        what = (f"{settings.num_chains} chains × {settings.num_warmup} + {settings.num_samples} "
+                "steps" if method == "nuts" else f"{settings.svi_steps} steps")
+        print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
+    if method == "nuts":
+        chains, div = _nuts(kwargs, map_point, settings, k_post, progress)
+        losses = np.zeros(0)
+    else:
+        chains, losses = _svi(kwargs, map_point, settings, k_post, progress)
+        div = 0
+    pooled = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()}
+    theta = {k: v for k, v in pooled.items() if not k.startswith("marginal")}
+    betas = _sample_maps(kwargs["spec"], kwargs, theta, k_map)
+    return PosteriorRun(method, chains, betas, div, losses, time.perf_counter() - t0)
+
+
+#: SVI's interval ends may differ from NUTS's by this fraction of NUTS's width.
+AGREEMENT_FRACTION = 0.25
+
+
+def interval_agreement(reference: dict, other: dict, names=("mu0", "a2", "mu_fold"),
+                       mass: float = 0.9) -> dict:
+    """Compare the central ``mass`` intervals of two sets of draws, end by end.
+
+    For each site: both intervals, the larger end difference as a fraction of
+    the reference's width, and whether it is within :data:`AGREEMENT_FRACTION`.
+    """
+    q = [0.5 - mass / 2, 0.5 + mass / 2]
+    out = {}
+    for k in names:
+        if k not in reference or k not in other:
+            continue
+        a, b = np.quantile(reference[k], q), np.quantile(other[k], q)
+        gap = float(np.max(np.abs(a - b)) / (a[1] - a[0]))
+        out[k] = {"reference": a.tolist(), "other": b.tolist(), "end_gap_fraction": gap,
+                  "agree": bool(gap <= AGREEMENT_FRACTION)}
+    return out
+
+
+def compare_with_nuts(post, *, seed: int = 0, progress: bool = True) -> dict:
+    """NUTS on the same collapsed model as a reference for an SVI posterior.
+
+    Returns:
+        ``{"convergence": R̂ and ESS of the NUTS chains, "sites": the interval
+        agreement of SVI with NUTS per site, "agree": all sites agree}``.
+    """
+    kwargs = model_arguments(post.spec, post.features)
+    ref = sample_posterior(kwargs, post.map_point, post.settings, seed=seed + 1,
+                           progress=progress, method="nuts")
+    sites = interval_agreement(ref.samples, post.samples)
+    return {"convergence": convergence(ref.chains), "divergences": ref.divergences,
+            "sites": sites, "agree": all(v["agree"] for v in sites.values())}

@@ -1,0 +1,375 @@
+r"""The hybrid model with its linear part integrated out exactly (a neural-linear model).
+
+**Normal form** (paper eq. NF-model-polar, :mod:`bayeshopf.model.normal_form`).
+Recording ``i`` at ``μ_i`` on branch ``s_i`` is the circle of radius
+``r_i = r(μ_i; μ0, a2, s_i)`` traversed at a constant phase speed, so over one
+period ``u(φ) = r_i (cos φ, sin φ)`` with ``φ = ωt``.
+
+**Map** (paper eq. g). In the frame ``w`` of the features
+(:mod:`bayeshopf.features.harmonics`), with ``ũ = u / r_ref`` and
+``μ̃ = (μ − μ_c)/Δμ``,
+
+.. math::
+
+    w(φ) = T_L\,[ũ_1, ũ_2, μ̃]^T + T_s + (μ̃ L_1 + μ̃^2 L_2)\,ũ + μ̃^2 t_2
+           + \mathrm{NN}(ũ_1, ũ_2, μ̃),
+
+    \mathrm{NN}(x) = W_2^T \tanh(W_1^T x + b_1) + \text{(degree-2 and -3 terms of ũ)},
+
+Every coefficient of this map — ``T_L``, ``T_s``, ``L_1``, ``L_2``, ``t_2``, the
+network's output layer ``W_2`` and the polynomial shape terms — enters ``w``
+linearly. Collecting them in ``β_c`` (one column per channel ``c``), the
+predicted harmonic coefficients of recording ``i`` are
+
+.. math::  \hat y_{i,c} = Φ_i β_c,\qquad Φ_i = P\,Ψ(ũ(φ_n), μ̃_i),
+
+with ``Ψ`` the basis functions at ``N`` uniform phases and ``P`` the discrete
+Fourier projection onto ``[a_0, a_1..a_K, b_1..b_K]``.
+
+**Priors.** ``β_{c,j} ~ N(0, v_j)`` with ``v_j`` set by the basis function's
+group (module constants below): ``ρ`` (the orbit scale in the frame) times
+``τ_μ^p`` for a term of power ``p`` in μ̃ and ``τ_s`` for the shape terms
+(network and polynomial). ``τ_μ`` and ``τ_s`` are hyperparameters with
+log-normal priors, integrated over with the rest: how much the map may change
+with μ trades against μ0 (``docs`` of the collapsed-map probe), and the
+posterior must carry that. The hidden layer ``(W_1, b_1)`` is a fixed draw from
+its unit-normal prior (random features), so the network's prior is kept and its
+output layer integrated exactly.
+
+**Likelihood.** ``y_{i,c} ~ N(Φ_i β_c, diag(se_{i,c}^2 + σ_c^2 + σ_rel^2 y_{i,c}^2))``,
+with ``se`` the measured standard errors, ``σ_c ~ HalfNormal(0.02 ρ)`` one
+model-error scale per channel and ``σ_rel ~ HalfNormal(0.02)`` a model error in
+proportion to each coefficient (no free per-harmonic scatter that could take up
+the centre shift).
+
+**Collapsing.** With ``V = diag(v)``, ``D = diag(se^2 + σ^2)`` and
+``Φ' = Φ V^{1/2}``,
+
+.. math::
+
+    \log p(y_c\mid θ) = -\tfrac12\Big[y^T D^{-1} y - b^T A^{-1} b
+        + \log|D| + \log|A| + n\log 2π\Big],\quad
+    A = I + Φ'^T D^{-1} Φ',\ b = Φ'^T D^{-1} y,
+
+and ``β_c | y, θ ~ N(V^{1/2} A^{-1} b, V^{1/2} A^{-1} V^{1/2})``. The
+posterior of the few nonlinear parameters ``θ`` (the normal form's gaps, ``τ_μ``,
+``τ_s``, ``σ``) is sampled; ``β`` is drawn exactly given each draw of ``θ``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro
+import numpyro.distributions as dist
+
+from bayeshopf.features.frame import PlanarFrame
+from bayeshopf.model import normal_form
+
+#: Prior scale of the linear gains ``T_L[:, :2]`` relative to ρ (broad).
+LINEAR_SCALE = 2.0
+#: Prior scale of the shift ``T_s`` relative to ρ (the frame is centred on the data).
+SHIFT_SCALE = 1.0
+#: Log-normal prior of τ_μ (median, log-sd): a gain change of 10% per Δμ a priori.
+TAU_MU_PRIOR = (0.1, 1.0)
+#: Log-normal prior of τ_s (median, log-sd): shape terms of 10% of the orbit a priori.
+TAU_SHAPE_PRIOR = (0.1, 1.0)
+#: Half-normal scale of the model error σ_c relative to ρ.
+SIGMA_PRIOR = 0.02
+#: Half-normal scale of the relative model error σ_rel (a fraction of each coefficient).
+SIGMA_REL_PRIOR = 0.02
+#: Phases per orbit for the projection P (aliasing-free for K ≤ 8 with degree-3 terms).
+N_PHI = 32
+
+
+@dataclass(frozen=True)
+class CollapsedSpec:
+    """Static structure and data constants of the collapsed model (immutable).
+
+    Attributes:
+        criticality: ``"subcritical"`` or ``"supercritical"``.
+        frame: The common planar frame of the features.
+        n_harmonics: K.
+        mu_centre: μ_c (centre of the training μ).
+        mu_span: Δμ (range of the training μ); also the prior scale of the gaps.
+        mu_min: Smallest training μ.
+        mu_unstable_max: Largest unstable training μ, or ``None``.
+        orbit_scale: ρ, the median amplitude of the orbits' fundamentals (frame units).
+        nn_hidden: Hidden weights ``W_1`` (3 × H) and biases ``b_1`` (H,) of the
+            network (a fixed draw from their unit-normal prior).
+        mu_label: Name of μ.
+        mu_units: Unit of μ.
+        unfolding: ``"linear"`` (the paper's ``μ − μ0``) or ``"curved"``
+            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior).
+    """
+
+    criticality: str
+    frame: PlanarFrame
+    n_harmonics: int
+    mu_centre: float
+    mu_span: float
+    mu_min: float
+    mu_unstable_max: float | None
+    orbit_scale: float
+    nn_hidden: tuple
+    mu_label: str = "mu"
+    mu_units: str = ""
+    unfolding: str = "curved"
+
+    def mu_tilde(self, mu):
+        """``μ̃ = (μ − μ_c)/Δμ``."""
+        return (mu - self.mu_centre) / self.mu_span
+
+    @property
+    def n_basis(self) -> int:
+        """Number of basis functions J."""
+        return len(MONOMIALS) * len(MU_POWERS) + self.nn_hidden[0].shape[1]
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable form."""
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__
+             if k not in ("frame", "nn_hidden")}
+        d["frame"] = self.frame.to_dict()
+        d["nn_hidden"] = [np.asarray(a).tolist() for a in self.nn_hidden]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> CollapsedSpec:
+        """Inverse of :meth:`to_dict`."""
+        d = dict(d)
+        d["frame"] = PlanarFrame.from_dict(d["frame"])
+        d["nn_hidden"] = tuple(np.asarray(a) for a in d["nn_hidden"])
+        return cls(**d)
+
+
+def hidden_layer(width: int, seed: int = 0) -> tuple:
+    """A fixed draw ``(W_1, b_1) ~ N(0, 1)`` of the network's hidden layer (3 inputs)."""
+    rng = np.random.default_rng(seed)
+    return rng.standard_normal((3, width)), rng.standard_normal(width)
+
+
+#: Monomials ``ũ1^i ũ2^j`` of the map, by degree ``i + j`` (0: T_s; 1: T_L's gains;
+#: 2 and 3: the polynomial shape terms), each also multiplied by μ̃ and μ̃².
+MONOMIALS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3))
+#: Powers of μ̃ that multiply each monomial (T_L's μ column, L_1, L_2, …).
+MU_POWERS = (0, 1, 2)
+#: Prior scale, relative to ρ, of a monomial's coefficient by degree, before the
+#: factors τ_μ^p (power p of μ̃) and τ_s (degree ≥ 2).
+DEGREE_SCALE = {0: SHIFT_SCALE, 1: LINEAR_SCALE, 2: 1.0, 3: 1.0}
+
+
+def basis_names(spec: CollapsedSpec) -> list[str]:
+    """Readable names of the J basis functions (``"u1^2 m"``, ``"nn3"``, …)."""
+    names = []
+    for p in MU_POWERS:
+        for i, j in MONOMIALS:
+            term = " ".join(t for t in (f"u1^{i}" if i else "", f"u2^{j}" if j else "",
+                                       f"m^{p}" if p else "") if t)
+            names.append(term or "1")
+    return names + [f"nn{h}" for h in range(spec.nn_hidden[0].shape[1])]
+
+
+def basis(u, mu_tilde, nn_hidden):
+    """Basis functions ``Ψ(ũ, μ̃)``, shape ``(..., J)`` for ``ũ`` of shape ``(..., 2)``.
+
+    The monomials ``ũ1^i ũ2^j μ̃^p`` (:data:`MONOMIALS` × :data:`MU_POWERS`), then
+    the network's hidden features ``tanh(W_1ᵀ [ũ1, ũ2, μ̃] + b_1)``.
+    """
+    u1, u2 = u[..., 0], u[..., 1]
+    m = jnp.broadcast_to(mu_tilde, u1.shape)
+    mono = [u1**i * u2**j for i, j in MONOMIALS]
+    cols = [c * m**p for p in MU_POWERS for c in mono]
+    x = jnp.stack([u1, u2, m], axis=-1)
+    W, b = nn_hidden
+    h = jnp.tanh(x @ jnp.asarray(W) + jnp.asarray(b))
+    return jnp.concatenate([jnp.stack(cols, axis=-1), h], axis=-1)
+
+
+def prior_sd(spec: CollapsedSpec, tau_mu, tau_shape):
+    """Prior standard deviations ``√v_j`` of the J coefficients (module docstring)."""
+    rho = spec.orbit_scale
+    sds = []
+    for p in MU_POWERS:
+        for i, j in MONOMIALS:
+            deg = i + j
+            s = rho * DEGREE_SCALE[deg] * tau_mu**p * (tau_shape if deg >= 2 else 1.0)
+            sds.append(jnp.broadcast_to(s, jnp.shape(tau_mu)))
+    H = spec.nn_hidden[0].shape[1]
+    nn = jnp.broadcast_to(rho * tau_shape / jnp.sqrt(H), jnp.shape(tau_mu) + (H,))
+    return jnp.concatenate([jnp.stack(sds, axis=-1), nn], axis=-1)
+
+
+def reference_radius(spec: CollapsedSpec, a2):
+    """``r_ref``: ``√a2`` (subcritical: the stable radius at μ0), ``√Δμ`` (supercritical)."""
+    if spec.criticality == "subcritical":
+        return jnp.sqrt(a2)
+    return jnp.sqrt(spec.mu_span) * jnp.ones_like(a2)
+
+
+def projection(n_harmonics: int, n_phi: int = N_PHI) -> np.ndarray:
+    """``P``: values at ``n_phi`` uniform phases → ``[a_0, a_1..a_K, b_1..b_K]``, (2K+1, N)."""
+    phi = 2 * np.pi * np.arange(n_phi) / n_phi
+    k = np.arange(1, n_harmonics + 1)[:, None]
+    return np.concatenate([np.full((1, n_phi), 1.0 / n_phi), 2.0 / n_phi * np.cos(k * phi),
+                           2.0 / n_phi * np.sin(k * phi)], axis=0)
+
+
+def unfolding(mu, mu0, w, mu_fold):
+    r"""The unfolding ``β(μ)`` that replaces ``μ − μ0`` in ``ṙ = β r + a2 r³ − r⁵``.
+
+    .. math::  β(μ) = \frac{e^{b(μ-μ0)} - 1}{b},\qquad b = \frac{w}{μ0 - μ_{SN}},
+
+    monotone for every ``w`` (its slope ``e^{b(μ−μ0)}`` is positive), with
+    ``β(μ0) = 0`` and ``β'(μ0) = 1``, so μ0 stays the Hopf point; ``w = 0`` is the
+    paper's ``μ − μ0``. ``w`` is the log of the ratio of the unfolding's slopes at
+    μ0 and at the fold.
+    """
+    x = mu - mu0
+    bx = w * x / (mu0 - mu_fold)
+    safe = jnp.where(jnp.abs(bx) < 1e-8, 1.0, bx)
+    return jnp.where(jnp.abs(bx) < 1e-8, x * (1 + 0.5 * bx), x * jnp.expm1(safe) / safe)
+
+
+def radius(spec: CollapsedSpec, mu, sign, theta: dict):
+    """Normal-form LCO radius at μ (``nan`` where the branch does not exist)."""
+    a2, a4 = theta.get("a2", -1.0), theta.get("a4", -1.0)
+    if "w_unfold" in theta:
+        beta = unfolding(mu, theta["mu0"], theta["w_unfold"], theta["mu_fold"])
+        return normal_form.lco_radius(beta, 0.0, a2, sign, a4)
+    return normal_form.lco_radius(mu, theta["mu0"], a2, sign, a4)
+
+
+def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI):
+    """``Φ_i = P Ψ_i`` for every recording, shape ``(n_rec, 2K+1, J)``."""
+    phi = 2 * jnp.pi * jnp.arange(n_phi) / n_phi
+    r = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
+    u = r[:, None, None] * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
+    psi = basis(u, spec.mu_tilde(mu)[:, None], spec.nn_hidden)        # (n, N, J)
+    return jnp.einsum("kn,inj->ikj", projection(spec.n_harmonics, n_phi), psi)
+
+
+def _whitened(Phi, y, d, sd):
+    """``(A, b, yᵀD⁻¹y, log|D|)`` of the collapsed Gaussian (module docstring)."""
+    Phi_s = Phi * sd                               # Φ' = Φ V^{1/2}
+    Dinv = 1.0 / d
+    A = jnp.eye(Phi.shape[-1]) + Phi_s.T @ (Dinv[:, None] * Phi_s)
+    b = Phi_s.T @ (Dinv * y)
+    return A, b, jnp.sum(Dinv * y * y), jnp.sum(jnp.log(d))
+
+
+def log_marginal(Phi, y, d, sd):
+    """``log N(y | 0, Φ V Φᵀ + D)`` with ``V = diag(sd²)``, ``D = diag(d)`` (Woodbury)."""
+    A, b, yDy, logdetD = _whitened(Phi, y, d, sd)
+    L = jnp.linalg.cholesky(A)
+    z = jax.scipy.linalg.solve_triangular(L, b, lower=True)
+    logdetA = 2.0 * jnp.sum(jnp.log(jnp.diag(L)))
+    return -0.5 * (yDy - z @ z + logdetD + logdetA + y.size * jnp.log(2 * jnp.pi))
+
+
+def conditional_draw(Phi, y, d, sd, eps):
+    """A draw of ``β | y, θ`` from standard-normal ``eps``, and the mean ``E[β | y, θ]``.
+
+    In the whitened coordinates the conditional is ``N(A⁻¹b, A⁻¹)``; with
+    ``A = L Lᵀ`` a draw is ``A⁻¹b + L⁻ᵀ ε``.
+    """
+    A, b, _, _ = _whitened(Phi, y, d, sd)
+    L = jnp.linalg.cholesky(A)
+    mean_w = jax.scipy.linalg.cho_solve((L, True), b)
+    noise_w = jax.scipy.linalg.solve_triangular(L.T, eps, lower=False)
+    return sd * (mean_w + noise_w), sd * mean_w
+
+
+def normal_form_sites(spec: CollapsedSpec) -> dict:
+    """The normal form's sites: gaps to the fold and the Hopf point (or κ), μ0, a2, a4.
+
+    Subcritical: ``μ_SN = μ_min − g_fold``, ``μ0 = max(μ_SN, μ_u,max) + g_hopf``
+    with ``g ~ HalfNormal(Δμ)``, so every recording lies on its branch; ``a2``
+    follows from the fold, ``β(μ_SN) = −a2²/4``. Supercritical (gauge
+    ``a2 = −1``, ``a4 = −κ``): ``μ0 = μ_min − g_hopf``, ``κ ~ HalfNormal(1/Δμ)``.
+    """
+    span = spec.mu_span
+    if spec.criticality == "subcritical":
+        g_fold = numpyro.sample("gap_fold", dist.HalfNormal(span))
+        g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
+        mu_fold = numpyro.deterministic("mu_fold", spec.mu_min - g_fold)
+        anchor = mu_fold if spec.mu_unstable_max is None else jnp.maximum(
+            mu_fold, spec.mu_unstable_max)
+        mu0 = numpyro.deterministic("mu0", anchor + g_hopf)
+        theta = {"mu0": mu0, "mu_fold": mu_fold}
+        if spec.unfolding == "curved":
+            w = numpyro.sample("w_unfold", dist.Normal(0.0, 1.0))
+            theta["w_unfold"] = w
+            beta_fold = -unfolding(mu_fold, mu0, w, mu_fold)
+        else:
+            beta_fold = mu0 - mu_fold
+        theta["a2"] = numpyro.deterministic("a2", 2.0 * jnp.sqrt(beta_fold))
+    else:
+        g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
+        kappa = numpyro.sample("kappa", dist.HalfNormal(1.0 / span))
+        theta = {"mu0": numpyro.deterministic("mu0", spec.mu_min - g_hopf), "a2": -1.0,
+                 "a4": numpyro.deterministic("a4", -kappa)}
+    return theta
+
+
+def hyper_sites(spec: CollapsedSpec):
+    """``τ_μ``, ``τ_s``, the model error ``σ_c`` of each channel and the relative one ``σ_rel``."""
+    tau_mu = numpyro.sample("tau_mu", dist.LogNormal(np.log(TAU_MU_PRIOR[0]), TAU_MU_PRIOR[1]))
+    tau_shape = numpyro.sample(
+        "tau_shape", dist.LogNormal(np.log(TAU_SHAPE_PRIOR[0]), TAU_SHAPE_PRIOR[1]))
+    sigma = numpyro.sample(
+        "sigma", dist.HalfNormal(SIGMA_PRIOR * spec.orbit_scale).expand([2]).to_event(1))
+    sigma_rel = numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))
+    return tau_mu, tau_shape, sigma, sigma_rel
+
+
+def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
+    """``se² + σ_c² + (σ_rel y)²`` per coefficient, shape of ``coeffs`` ``(n_rec, 2, 2K+1)``.
+
+    The measurement error, a model error per channel, and a model error in
+    proportion to the coefficient (a misfit of the orbit's size grows with it).
+    """
+    return coeffs_se**2 + sigma[:, None] ** 2 + (sigma_rel * coeffs) ** 2
+
+
+def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se):
+    """NumPyro model of the nonlinear parameters, the map integrated out.
+
+    Args:
+        spec: Structure and data constants.
+        mu: μ of each recording, ``(n_rec,)``.
+        sign: Branch sign (+1 stable, −1 unstable), ``(n_rec,)``.
+        coeffs: Measured aligned coefficients, ``(n_rec, 2, 2K+1)``.
+        coeffs_se: Their standard errors, same shape.
+    """
+    theta = normal_form_sites(spec)
+    tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
+    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+    sd = prior_sd(spec, tau_mu, tau_shape)
+    var = error_variance(coeffs, coeffs_se, sigma, sigma_rel)
+    for c in range(2):
+        y = coeffs[:, c].reshape(-1)
+        d = var[:, c].reshape(-1)
+        numpyro.factor(f"marginal_{c}", log_marginal(Phi, y, d, sd))
+
+
+def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
+    """One exact draw of the map's coefficients ``β`` (J, 2) given one draw ``θ``."""
+    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+    sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
+    eps = jax.random.normal(key, (2, spec.n_basis))
+    var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
+    betas = []
+    for c in range(2):
+        d = var[:, c].reshape(-1)
+        betas.append(conditional_draw(Phi, coeffs[:, c].reshape(-1), d, sd, eps[c])[0])
+    return jnp.stack(betas, axis=-1)
+
+
+def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):
+    """Predicted orbit ``w(φ)`` in the frame at one μ, shape ``phi.shape + (2,)``."""
+    r = radius(spec, mu, sign, theta)
+    u = (r / reference_radius(spec, theta.get("a2", -1.0))) * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
+    return basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta

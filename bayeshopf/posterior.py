@@ -1,0 +1,436 @@
+"""The whole job on the collapsed core: recordings → harmonics → MAP → NUTS → posterior.
+
+>>> import bayeshopf.posterior as bp
+>>> post = bp.fit_hybrid(recordings, "subcritical", seed=0)    # doctest: +SKIP
+>>> post.interval("mu0"), post.diagnostics["warnings"]           # doctest: +SKIP
+
+:func:`fit_hybrid` returns a :class:`HybridPosterior`: the posterior draws of the
+normal form and the hyperparameters, one exact draw of the map per draw, the
+convergence diagnostics, and methods for orbits, amplitudes, the bifurcation
+diagram, the posterior predictive check and each recording's orbit error.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.diagnostics.bifurcation import LEVELS, BifurcationDiagram, BranchBand
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.diagnostics.summaries import Interval, interval
+from bayeshopf.errors import FitError
+from bayeshopf.features.harmonics import HarmonicFeatures, extract_harmonics, reconstruct
+from bayeshopf.inference import collapsed as ci
+from bayeshopf.inference.cache import enable_compilation_cache
+from bayeshopf.model import collapsed as cm
+from bayeshopf.model import normal_form
+
+#: Phases per predicted orbit.
+N_PHI = 128
+#: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
+ORBIT_ERROR_MAX = 0.05
+#: ... or this many times its measured segment spread.
+ORBIT_SPREAD_FACTOR = 2.0
+#: Model error σ_c above this many times the median measured standard error of
+#: the channel's leading coefficients is reported as "the scatter is large
+#: against the measured spread".
+SIGMA_RATIO_MAX = 10.0
+#: Draws used for bands (quantiles at 5%–95% are stable with 500).
+N_BAND_DRAWS = 500
+
+
+def _sign(branch: str) -> float:
+    if branch not in ("stable", "unstable"):
+        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    return normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
+
+
+@dataclass(frozen=True)
+class HybridPosterior:
+    """A fitted Bayesian hybrid model on the collapsed core (immutable).
+
+    Attributes:
+        spec: Structure and data constants of the model.
+        features: The training features.
+        map_point: The MAP stage.
+        run: The posterior stage (draws, map draws, diagnostics inputs).
+        settings: Settings used.
+        seed: Seed used.
+        mu_label: Name of μ.
+        mu_units: Unit of μ.
+        amplitude_units: Unit of the amplitude (z1's).
+        timings: Seconds per stage.
+        diagnostics: Convergence and fit checks (:func:`diagnose`).
+    """
+
+    spec: cm.CollapsedSpec
+    features: HarmonicFeatures
+    map_point: ci.MapPoint
+    run: ci.PosteriorRun
+    settings: ci.CollapsedSettings
+    seed: int
+    mu_label: str
+    mu_units: str
+    amplitude_units: str
+    timings: dict = field(default_factory=dict, compare=False)
+    diagnostics: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def criticality(self) -> str:
+        """``"subcritical"`` or ``"supercritical"``."""
+        return self.spec.criticality
+
+    @property
+    def samples(self) -> dict:
+        """Posterior draws of every site, chains pooled."""
+        return self.run.samples
+
+    @property
+    def theta(self) -> dict:
+        """Draws of the nonlinear parameters the map and orbits need."""
+        return {k: v for k, v in self.samples.items() if not k.startswith("marginal")}
+
+    def interval(self, name: str, mass: float = 0.9) -> Interval | None:
+        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …); None if absent."""
+        if name not in self.samples:
+            return None
+        return interval(self.samples[name], mass)
+
+    # ----------------------------------------------------------------- orbits
+    def _draw_indices(self, n: int | None) -> np.ndarray:
+        return draw_indices(self.run.betas.shape[0], n)
+
+    def orbit_coefficients(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
+        """Harmonic coefficients of the predicted orbits in the frame, ``(n, n_mu, 2, 2K+1)``.
+
+        The model orbit at μ, projected on the K harmonics the data have
+        (``nan`` where the branch does not exist in a draw).
+        """
+        idx = self._draw_indices(n_draws)
+        return orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                  self.run.betas[idx], mu, _sign(branch))
+
+    def _noise_sd(self, coeffs, coeffs_se=None):
+        """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``."""
+        idx = self._draw_indices(N_BAND_DRAWS)
+        se = np.median(self.features.coeffs_se, axis=0) if coeffs_se is None else coeffs_se
+        return noise_sd(coeffs, np.asarray(self.samples["sigma"])[idx],
+                        np.asarray(self.samples["sigma_rel"])[idx], se)
+
+    def orbits(self, mu: float, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
+        """Predicted orbits in physical units at one μ, ``(n, N_PHI, 2)``."""
+        c = self.orbit_coefficients([mu], branch, n_draws)[:, 0]
+        phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
+        return self.spec.frame.from_frame(reconstruct(c, phi))
+
+    def _amplitude_of(self, coeffs):
+        return amplitude_of(self.spec, coeffs)
+
+    def amplitude(self, mu, branch: str = "stable", predictive: bool = False,
+                  coeffs_se=None) -> np.ndarray:
+        """Amplitude draws (peak-to-peak of z1) at μ, ``(n, n_mu)``; ``nan`` where no LCO.
+
+        ``predictive=True`` gives a new recording's amplitude: the model's
+        coefficients plus Gaussian noise with the model error σ and the
+        standard error ``coeffs_se`` (by default the training recordings'
+        median).
+        """
+        c = self.orbit_coefficients(mu, branch)
+        if predictive:
+            rng = np.random.default_rng(self.seed)
+            c = c + self._noise_sd(c, coeffs_se) * rng.standard_normal(c.shape)
+        return self._amplitude_of(c)
+
+    # ----------------------------------------------------------------- summaries
+    def default_mu_grid(self, n: int = 120) -> np.ndarray:
+        """μ from below the fold (or the Hopf point) to beyond the data."""
+        s = self.samples
+        lo = min(self.spec.mu_min, float(np.quantile(s["mu0"], 0.01)))
+        if "mu_fold" in s:
+            lo = min(lo, float(np.quantile(s["mu_fold"], 0.01)))
+        hi = max(self.spec.mu_min + self.spec.mu_span, float(np.quantile(s["mu0"], 0.99)))
+        pad = 0.05 * (hi - lo)
+        return np.linspace(lo - pad, hi + pad, n)
+
+    def _band(self, mu, branch) -> BranchBand:
+        c = self.orbit_coefficients(mu, branch)
+        amp = self._amplitude_of(c)
+        rng = np.random.default_rng(self.seed)
+        amp_p = self._amplitude_of(c + self._noise_sd(c) * rng.standard_normal(c.shape))
+        q, p = _quantiles(amp)
+        qp, _ = _quantiles(amp_p)
+        return BranchBand(int(_sign(branch)), np.asarray(mu), q, p, qp)
+
+    def diagram(self, mu=None) -> BifurcationDiagram:
+        """The posterior bifurcation diagram with curve and predictive bands."""
+        mu = self.default_mu_grid() if mu is None else np.asarray(mu, float)
+        stable = self._band(mu, "stable")
+        if self.criticality == "subcritical":
+            unstable = self._band(mu, "unstable")
+            idx = self._draw_indices(N_BAND_DRAWS)
+            c = orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                   self.run.betas[idx], self.samples["mu_fold"][idx][:, None],
+                                   normal_form.STABLE, per_draw=True)
+            fold_amp = self._amplitude_of(c)[:, 0]
+            fold = interval(self.samples["mu_fold"])
+            fold_iv = interval(fold_amp)
+        else:
+            unstable, fold, fold_iv = None, None, None
+        return BifurcationDiagram(stable, unstable, interval(self.samples["mu0"]), fold, fold_iv)
+
+    def ppc(self) -> PosteriorPredictiveCheck:
+        """Posterior predictive check of each training recording (amplitudes and coefficients)."""
+        f = self.features
+        curve, pred, p_amp = [], [], []
+        reps = []
+        rng = np.random.default_rng(self.seed)
+        for i in range(f.n_recordings):
+            c = self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+            rep = c + self._noise_sd(c, f.coeffs_se[i]) * rng.standard_normal(c.shape)
+            reps.append(rep)
+            a, ap = self._amplitude_of(c), self._amplitude_of(rep)
+            curve.append(interval(a))
+            pred.append(interval(ap))
+            p_amp.append(float(np.mean(ap[np.isfinite(ap)] <= f.amplitude[i])))
+        reps = np.array(reps)                                   # (n_rec, n, 2, 2K+1)
+        flat = reps.reshape(reps.shape[0], reps.shape[1], -1)
+        obs = f.coeffs.reshape(f.n_recordings, -1)
+        coeff_p = np.nanmean(flat <= obs[:, None], axis=1)
+        coeff_z = (obs - np.nanmean(flat, axis=1)) / np.nanstd(flat, axis=1)
+        return PosteriorPredictiveCheck(
+            names=f.names, mu=f.mu, unstable=f.unstable, measured=f.amplitude,
+            curve=tuple(curve), predictive=tuple(pred), amplitude_p=np.array(p_amp),
+            coeff_p=coeff_p, coeff_z=coeff_z)
+
+    def orbit_error(self) -> list[dict]:
+        """Each recording's posterior-median orbit against its measured mean orbit.
+
+        ``relative``: RMS distance over the orbit (frame units), relative to the
+        measured orbit's RMS radius; ``spread``: the segments' RMS distance from
+        their mean orbit, relative to the same radius; ``ok``: relative below
+        :data:`ORBIT_ERROR_MAX` or below :data:`ORBIT_SPREAD_FACTOR` × spread.
+        """
+        f = self.features
+        phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
+        out = []
+        for i in range(f.n_recordings):
+            c = self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+            c = c[np.all(np.isfinite(c), axis=(1, 2))]
+            data = reconstruct(f.coeffs[i], phi)
+            radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
+            if c.shape[0] == 0:
+                out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False})
+                continue
+            model = reconstruct(np.median(c, axis=0), phi)
+            rel = float(np.sqrt(np.mean(np.sum((model - data) ** 2, -1)))) / radius
+            spread = float(f.segment_rms[i]) / radius
+            out.append({"name": f.names[i], "relative": rel, "spread": spread,
+                        "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread)})
+        return out
+
+
+def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
+    """``n`` draw indices spread evenly over ``total`` (all of them when ``n ≥ total``)."""
+    if n is None or n >= total:
+        return np.arange(total)
+    return np.unique(np.linspace(0, total - 1, n).round().astype(int))
+
+
+_ORBIT_FNS: dict[int, tuple] = {}
+
+
+def _orbit_fn(spec: cm.CollapsedSpec):
+    """The jitted ``(θ, β, μ per draw, sign) ↦ coefficients``, compiled once per spec."""
+    hit = _ORBIT_FNS.get(id(spec))
+    if hit is not None and hit[0] is spec:
+        return hit[1]
+    P = jnp.asarray(cm.projection(spec.n_harmonics, N_PHI))
+    phi = 2 * jnp.pi * jnp.arange(N_PHI) / N_PHI
+
+    def one(a, sign):
+        t, b, mu = a
+        w = jax.vmap(lambda m: cm.orbit(spec, t, b, m, sign, phi))(mu)   # (n_mu, N, 2)
+        return jnp.einsum("kn,mnc->mck", P, w)
+
+    # lax.map over draws: XLA's batched linear algebra is slow on CPU
+    fn = jax.jit(lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu)))
+    if len(_ORBIT_FNS) > 16:
+        _ORBIT_FNS.clear()
+    _ORBIT_FNS[id(spec)] = (spec, fn)
+    return fn
+
+
+def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: float, *,
+                       per_draw: bool = False):
+    """Predicted orbits' harmonic coefficients, ``(n, n_mu, 2, 2K+1)``, for draws ``(θ, β)``.
+
+    Args:
+        spec: Model structure.
+        theta: Draws of the nonlinear parameters, leading axis ``n``.
+        betas: Map coefficients, ``(n, J, 2)``.
+        mu: μ values ``(n_mu,)``, the same for every draw; with ``per_draw``,
+            shape ``(n, n_mu)`` (e.g. each draw's own fold).
+        sign: +1 stable, −1 unstable.
+    """
+    n = np.shape(betas)[0]
+    mu = np.asarray(mu, dtype=float)
+    mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    return np.asarray(_orbit_fn(spec)(th, jnp.asarray(betas), jnp.asarray(mu), float(sign)))
+
+
+def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
+    """``√(se² + σ_c² + (σ_rel c)²)`` for predicted coefficients ``(n, ..., 2, 2K+1)``.
+
+    ``sigma`` ``(n, 2)`` and ``sigma_rel`` ``(n,)`` per draw; ``coeffs_se`` ``(2, 2K+1)``.
+    """
+    c = np.asarray(coeffs)
+    extra = (1,) * (c.ndim - 3)
+    s = np.asarray(sigma).reshape((-1,) + extra + (2, 1))
+    r = np.asarray(sigma_rel).reshape((-1,) + extra + (1, 1))
+    return np.sqrt(np.asarray(coeffs_se) ** 2 + s**2 + (r * c) ** 2)
+
+
+def amplitude_of(spec: cm.CollapsedSpec, coeffs) -> np.ndarray:
+    """Peak-to-peak of z1 of the orbits with these frame coefficients (last two axes)."""
+    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    z1 = spec.frame.from_frame(reconstruct(coeffs, phi))[..., 0]
+    return z1.max(axis=-1) - z1.min(axis=-1)
+
+
+def _quantiles(amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    exists = np.isfinite(amp)
+    p = exists.mean(axis=0)
+    q = np.full((len(LEVELS), amp.shape[1]), np.nan)
+    for j in np.flatnonzero(p >= 0.05):
+        q[:, j] = np.quantile(amp[exists[:, j], j], LEVELS)
+    return q, p
+
+
+def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None) -> dict:
+    """Convergence and fit checks, with one warning line per failed check.
+
+    * ``map``: gradient norm at the MAP and whether it is below the tolerance.
+    * ``posterior``: NUTS R̂ and bulk ESS of μ0, a2, the fold (and ``w``) with
+      the thresholds, divergences; SVI: the ELBO-plateau test.
+    * ``fit``: each recording's orbit error (``orbit_error``), whether its
+      amplitude lies in its 90% predictive band, and each channel's model error
+      σ against the measured standard errors.
+    """
+    warnings = []
+    mp = post.map_point
+    d = {"map": {"grad_norm": mp.grad_norm, "converged": mp.converged, "steps": mp.n_steps,
+                 "tolerance": ci.MAP_GTOL}}
+    if not mp.converged:
+        warnings.append(f"MAP: gradient norm {mp.grad_norm:.2g} after {mp.n_steps} L-BFGS steps "
+                        f"(tolerance {ci.MAP_GTOL:g})")
+    run = post.run
+    if run.method == "nuts":
+        conv = ci.convergence(run.chains)
+        d["posterior"] = {"method": "nuts", "chains": int(next(iter(run.chains.values())).shape[0]),
+                          "divergences": run.divergences, "r_hat_max": ci.RHAT_MAX,
+                          "ess_min": ci.ESS_MIN, "sites": conv}
+        for k, v in conv.items():
+            if not v["ok"]:
+                warnings.append(f"NUTS: {k} has R̂ {v['r_hat']:.3f} and bulk ESS "
+                                f"{v['ess_bulk']:.0f} (need R̂ ≤ {ci.RHAT_MAX}, ESS ≥ {ci.ESS_MIN})")
+        if run.divergences:
+            warnings.append(f"NUTS: {run.divergences} divergent transitions")
+    else:
+        pl = ci.elbo_plateau(run.losses)
+        d["posterior"] = {"method": "svi", "elbo_plateau": pl, "steps": int(run.losses.size)}
+        if not pl["plateau"]:
+            warnings.append(f"SVI: the −ELBO still falls ({pl['drop']:.3g} over the last 10% of "
+                            f"the steps, ±{pl['se']:.2g})")
+    ppc = ppc or post.ppc()
+    errs = post.orbit_error()
+    covered = ppc.covered
+    sigma = np.median(np.asarray(post.samples["sigma"]), axis=0)
+    se = np.median(post.features.coeffs_se[:, :, [1, 1 + post.spec.n_harmonics]], axis=(0, 2))
+    ratio = sigma / se
+    d["fit"] = {
+        "orbit_error": errs,
+        "amplitude_covered": [bool(c) for c in covered],
+        "sigma": sigma.tolist(), "sigma_over_measured_se": ratio.tolist(),
+    }
+    for e in errs:
+        if not e["ok"]:
+            rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
+            spread = "n/a" if e["spread"] is None else f"{100 * e['spread']:.1f}%"
+            warnings.append(f"fit: {e['name']}: orbit error {rel} of its size (limit "
+                            f"{100 * ORBIT_ERROR_MAX:.0f}% or {ORBIT_SPREAD_FACTOR:g}× its "
+                            f"segment spread {spread})")
+    for name, c in zip(post.features.names, covered, strict=True):
+        if not c:
+            warnings.append(f"fit: {name}: measured amplitude outside its 90% predictive band")
+    for ch, r in zip(post.spec.frame.names, ratio, strict=True):
+        if r > SIGMA_RATIO_MAX:
+            warnings.append(f"fit: model error of {ch} is {r:.0f}× its measured standard error: "
+                            "the map does not fit the orbits, the bands are wide for that reason")
+    d["warnings"] = warnings
+    return d
+
+
+def fit_hybrid(
+    recordings: RecordingSet | HarmonicFeatures,
+    criticality: str = "subcritical",
+    *,
+    seed: int = 0,
+    settings: ci.CollapsedSettings | None = None,
+    progress: bool = True,
+    compilation_cache: bool = True,
+) -> HybridPosterior:
+    """Fit the Bayesian hybrid normal-form model on the collapsed core.
+
+    Stages: phase-aligned harmonic features; a deterministic start and the MAP
+    (:func:`~bayeshopf.inference.collapsed.fit_map`); NUTS (or SVI) on the
+    nonlinear parameters with the map integrated out; one exact map draw per
+    posterior draw; diagnostics.
+
+    Args:
+        recordings: The recordings, or features already extracted.
+        criticality: ``"subcritical"`` or ``"supercritical"``.
+        seed: Seed of every random choice.
+        settings: :class:`~bayeshopf.inference.collapsed.CollapsedSettings`.
+        progress: Show progress.
+        compilation_cache: Use JAX's persistent compilation cache.
+
+    Returns:
+        A :class:`HybridPosterior` with its ``diagnostics``.
+    """
+    settings = settings or ci.CollapsedSettings()
+    if compilation_cache:
+        enable_compilation_cache()
+    timings = {}
+    t0 = time.perf_counter()
+    if isinstance(recordings, RecordingSet):
+        features = extract_harmonics(recordings, n_harmonics=settings.n_harmonics,
+                                     segment_periods=settings.segment_periods)
+        labels = recordings.mu_label, recordings.mu_units, recordings.units[0]
+    else:
+        features = recordings
+        labels = "mu", "", features.frame.units[0]
+    spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
+                         unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1])
+    kwargs = ci.model_arguments(spec, features)
+    timings["features"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if progress:
+        print("MAP: deterministic start and L-BFGS", file=sys.stderr)
+    map_point = ci.fit_map(kwargs, max_steps=settings.lbfgs_steps)
+    timings["map"] = time.perf_counter() - t0
+    run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress)
+    timings["posterior"] = run.seconds
+    post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
+                           timings=timings)
+    t0 = time.perf_counter()
+    diag = diagnose(post)
+    timings["diagnostics"] = time.perf_counter() - t0
+    return HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
+                           timings=timings, diagnostics=diag)

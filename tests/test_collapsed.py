@@ -1,0 +1,82 @@
+"""The collapsed model's algebra against direct computations (scipy, closed forms)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.stats import multivariate_normal
+
+from bayeshopf.features.frame import PlanarFrame
+from bayeshopf.model import collapsed as cm
+from bayeshopf.model import normal_form
+
+
+def _spec(unfolding="curved"):
+    return cm.CollapsedSpec("subcritical", PlanarFrame(np.zeros(2), np.eye(2)), 3, 16.0, 2.0,
+                            15.0, 16.5, 1.0, cm.hidden_layer(6), unfolding=unfolding)
+
+
+def test_log_marginal_equals_the_gaussian_it_collapses():
+    rng = np.random.default_rng(0)
+    Phi = rng.standard_normal((30, 8))
+    sd = np.exp(rng.standard_normal(8))
+    d = np.exp(rng.standard_normal(30)) * 0.1
+    y = rng.standard_normal(30)
+    direct = multivariate_normal(np.zeros(30), Phi @ np.diag(sd**2) @ Phi.T + np.diag(d)).logpdf(y)
+    np.testing.assert_allclose(cm.log_marginal(Phi, y, d, sd), direct, rtol=1e-10)
+
+
+def test_conditional_draws_have_the_closed_form_moments():
+    rng = np.random.default_rng(1)
+    Phi = rng.standard_normal((20, 4))
+    sd, d, y = np.array([1.0, 0.5, 2.0, 0.1]), np.full(20, 0.3), rng.standard_normal(20)
+    V = np.diag(sd**2)
+    cov = np.linalg.inv(np.linalg.inv(V) + Phi.T @ Phi / 0.3)
+    mean = cov @ Phi.T @ y / 0.3
+    eps = jax.random.normal(jax.random.PRNGKey(0), (20000, 4))
+    draws = np.asarray(jax.lax.map(lambda e: cm.conditional_draw(Phi, y, d, sd, e)[0], eps))
+    np.testing.assert_allclose(cm.conditional_draw(Phi, y, d, sd, jnp.zeros(4))[1], mean,
+                               atol=1e-10)
+    np.testing.assert_allclose(draws.mean(0), mean, atol=4 * np.sqrt(np.diag(cov).max() / 2e4))
+    np.testing.assert_allclose(np.cov(draws.T), cov, atol=0.05 * np.abs(cov).max())
+
+
+def test_design_is_the_projection_of_the_mapped_circle():
+    spec = _spec()
+    theta = {"mu0": 17.0, "mu_fold": 14.5, "a2": 2.0, "w_unfold": 0.8}
+    mu, sign = jnp.array([15.5, 16.0]), jnp.array([1.0, -1.0])
+    beta = jnp.asarray(np.random.default_rng(2).standard_normal((spec.n_basis, 2)))
+    Phi = cm.design(spec, mu, sign, theta, n_phi=64)
+    phi = jnp.linspace(0, 2 * jnp.pi, 64, endpoint=False)
+    for i in range(2):
+        w = cm.orbit(spec, theta, beta, mu[i], sign[i], phi)
+        coeffs = cm.projection(3, 64) @ w                       # (2K+1, 2)
+        np.testing.assert_allclose(Phi[i] @ beta, coeffs, atol=1e-12)
+
+
+def test_curved_unfolding_keeps_the_hopf_point_and_is_monotone():
+    mu = np.linspace(13.0, 19.0, 401)
+    lin = cm.unfolding(mu, 17.0, 0.0, 14.5)
+    np.testing.assert_allclose(lin, mu - 17.0, atol=1e-12)
+    for w in (-2.0, 1.5, 4.0):
+        b = np.asarray(cm.unfolding(mu, 17.0, w, 14.5))
+        assert np.all(np.diff(b) > 0)
+        slope = jax.grad(lambda m: cm.unfolding(m, 17.0, w, 14.5))(17.0)
+        assert abs(float(cm.unfolding(17.0, 17.0, w, 14.5))) < 1e-14
+        np.testing.assert_allclose(slope, 1.0, rtol=1e-10)
+
+
+def test_branches_meet_at_the_sampled_fold():
+    """With a2 from β(μ_SN) = −a2²/4, both radii coincide at μ_SN (closed form)."""
+    mu0, mu_fold, w = 17.0, 14.5, 1.7
+    beta_fold = -float(cm.unfolding(mu_fold, mu0, w, mu_fold))
+    theta = {"mu0": mu0, "mu_fold": mu_fold, "a2": 2 * np.sqrt(beta_fold), "w_unfold": w}
+    spec = _spec()
+    rs = cm.radius(spec, mu_fold + 1e-9, normal_form.STABLE, theta)
+    ru = cm.radius(spec, mu_fold + 1e-9, normal_form.UNSTABLE, theta)
+    np.testing.assert_allclose(rs, ru, rtol=1e-3)
+    assert np.isnan(cm.radius(spec, mu_fold - 0.01, normal_form.STABLE, theta))
+    assert np.isnan(cm.radius(spec, mu0 + 0.01, normal_form.UNSTABLE, theta))
+    # on the curved branch the radius solves r⁴ − a2 r² − β(μ) = 0
+    r = float(cm.radius(spec, 16.0, normal_form.STABLE, theta))
+    b = float(cm.unfolding(16.0, mu0, w, mu_fold))
+    np.testing.assert_allclose(r**4 - theta["a2"] * r**2 - b, 0.0, atol=1e-12)

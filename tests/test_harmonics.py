@@ -1,0 +1,71 @@
+"""Harmonic features against planted signals with known coefficients and noise."""
+
+import numpy as np
+import pytest
+
+from bayeshopf.data.recording import Recording, RecordingSet
+from bayeshopf.errors import DataError
+from bayeshopf.features.frame import PlanarFrame
+from bayeshopf.features.harmonics import (
+    align,
+    extract_harmonics,
+    reconstruct,
+    shift_origin,
+    time_design,
+)
+
+OMEGA = 2 * np.pi * 2.5
+# true coefficients [a0, a1, a2, b1, b2] of each channel, phase-aligned (b of z1's fundamental 0)
+TRUE = np.array([[0.1, 1.0, 0.05, 0.0, 0.03], [-0.2, 0.4, 0.02, 0.8, -0.04]])
+IDENTITY = PlanarFrame(np.zeros(2), np.eye(2), ("x", "y"))
+
+
+def _record(mu, t, noise, rng, t0=0.37):
+    z = time_design(t + t0, OMEGA, 2) @ TRUE.T   # delayed: the aligner must undo t0
+    z = z + noise * rng.standard_normal(z.shape)
+    return Recording(t, {"x": z[:, 0], "y": z[:, 1]}, {}, mu, "stable", name=f"r{mu}")
+
+
+def _set(duration, fs, noise, seed=0, n=2):
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(duration * fs)) / fs
+    return RecordingSet(tuple(_record(1.0 + i, t, noise, rng) for i in range(n)), ("x", "y"))
+
+
+def test_shift_origin_matches_a_time_shift():
+    rng = np.random.default_rng(1)
+    c = rng.standard_normal((2, 9))
+    phi = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    shifted = shift_origin(c, np.array(0.7))
+    np.testing.assert_allclose(reconstruct(shifted, phi), reconstruct(c, phi + 0.7), atol=1e-12)
+    a = align(c)
+    assert abs(a[0, 5]) < 1e-12 and a[0, 1] > 0
+
+
+def test_recovers_planted_coefficients_with_honest_standard_errors():
+    f = extract_harmonics(_set(20.0, 500.0, 0.02), n_harmonics=2, frame=IDENTITY)
+    assert f.n_segments.min() >= 9
+    np.testing.assert_allclose(f.frequency_hz, 2.5, rtol=1e-5)
+    z = (f.coeffs - TRUE[None]) / f.coeffs_se
+    z = np.delete(z.reshape(2, -1), 3, axis=1)    # z1's b1 is 0 by construction
+    assert np.max(np.abs(z)) < 4.5
+    # the white-noise standard error of a coefficient: σ √(2/n) (σ/√n for a0)
+    n = 20.0 * 500.0
+    expected = 0.02 * np.sqrt(2 / n)
+    ratio = np.median(f.coeffs_se[:, :, 1:]) / expected
+    assert 0.7 < ratio < 1.6
+
+
+def test_single_segment_record_has_a_standard_error():
+    # 2 s at 2.5 Hz: five periods, one segment, no spread to measure
+    f = extract_harmonics(_set(2.0, 1000.0, 0.02), n_harmonics=2, frame=IDENTITY,
+                          segment_periods=5.0)
+    assert (f.n_segments == 1).all()
+    assert (f.coeffs_se > 0).all() and (f.segment_rms == 0).all()
+    z = np.abs(f.coeffs - TRUE[None]) / f.coeffs_se
+    assert np.delete(z.reshape(2, -1), 3, axis=1).max() < 4.5
+
+
+def test_less_than_one_period_is_refused():
+    with pytest.raises(DataError, match="at least one period"):
+        extract_harmonics(_set(0.3, 1000.0, 0.0), n_harmonics=2, frame=IDENTITY)
