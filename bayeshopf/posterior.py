@@ -97,7 +97,7 @@ class HybridPosterior:
         return {k: v for k, v in self.samples.items() if not k.startswith("marginal")}
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
-        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …); None if absent."""
+        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
         if name not in self.samples:
             return None
         return interval(self.samples[name], mass)
@@ -277,6 +277,7 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
         mu: μ values ``(n_mu,)``, the same for every draw; with ``per_draw``,
             shape ``(n, n_mu)`` (e.g. each draw's own fold).
         sign: +1 stable, −1 unstable.
+        per_draw: Whether ``mu`` holds one row of μ per draw.
     """
     n = np.shape(betas)[0]
     mu = np.asarray(mu, dtype=float)

@@ -289,14 +289,11 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         chains = {k: v for k, v in post.run.chains.items() if not k.startswith("marginal")}
         n_chain, n_draw = next(iter(chains.values())).shape[:2]
         chains["beta"] = post.run.betas.reshape((n_chain, n_draw) + post.run.betas.shape[1:])
-        import arviz as az
-
-        idata = az.from_dict(
-            posterior=chains,
-            observed_data={"coeffs": post.features.coeffs},
-            constant_data={"mu": post.features.mu,
-                           "unstable": post.features.unstable.astype(int),
-                           "coeffs_se": post.features.coeffs_se},
+        idata = arviz_io.chains_to_inference_data(
+            chains,
+            observed={"coeffs": post.features.coeffs},
+            constant={"mu": post.features.mu, "unstable": post.features.unstable.astype(int),
+                      "coeffs_se": post.features.coeffs_se},
             attrs={"criticality": post.criticality, "seed": post.seed,
                    "bayeshopf_version": bayeshopf.__version__},
         )

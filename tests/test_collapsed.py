@@ -60,7 +60,7 @@ def test_curved_unfolding_keeps_the_hopf_point_and_is_monotone():
     for w in (-2.0, 1.5, 4.0):
         b = np.asarray(cm.unfolding(mu, 17.0, w, 14.5))
         assert np.all(np.diff(b) > 0)
-        slope = jax.grad(lambda m: cm.unfolding(m, 17.0, w, 14.5))(17.0)
+        slope = jax.grad(lambda m, w=w: cm.unfolding(m, 17.0, w, 14.5))(17.0)
         assert abs(float(cm.unfolding(17.0, 17.0, w, 14.5))) < 1e-14
         np.testing.assert_allclose(slope, 1.0, rtol=1e-10)
 

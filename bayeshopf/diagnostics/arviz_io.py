@@ -199,3 +199,22 @@ def compare_with_loo(log_liks: dict, held_out: dict | None = None,
 def compare(log_liks: dict) -> dict:
     """ArviZ ``compare`` of models by PSIS-LOO; returns name -> rank, elpd, dse, weight."""
     return compare_with_loo(log_liks)[0]
+
+
+def rhat_ess(chains: dict) -> dict:
+    """R̂ and bulk ESS per site from draws by chain ``(n_chains, n_draws)`` (scalar sites)."""
+    ds = az.convert_to_dataset({k: np.asarray(v) for k, v in chains.items()})
+    rhat, ess = az.rhat(ds), az.ess(ds, method="bulk")
+    return {k: (float(rhat[k]), float(ess[k])) for k in chains}
+
+
+def chains_to_inference_data(posterior: dict, *, observed: dict | None = None,
+                             constant: dict | None = None,
+                             attrs: dict | None = None) -> az.InferenceData:
+    """InferenceData from draws by chain ``(n_chains, n_draws, ...)``."""
+    return az.from_dict(
+        posterior={k: np.asarray(v) for k, v in posterior.items()},
+        observed_data={k: np.asarray(v) for k, v in (observed or {}).items()} or None,
+        constant_data={k: np.asarray(v) for k, v in (constant or {}).items()} or None,
+        attrs=attrs or {},
+    )

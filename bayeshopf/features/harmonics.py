@@ -82,7 +82,11 @@ def align(coeffs: np.ndarray) -> np.ndarray:
 
 
 def reconstruct(coeffs, phi) -> np.ndarray:
-    """Orbit points at phases φ from coefficients ``(..., n_ch, 2K+1)``: shape ``(..., n_phi, n_ch)``."""
+    """Orbit points at phases φ from coefficients ``(..., n_ch, 2K+1)``.
+
+    Returns:
+        Shape ``(..., n_phi, n_ch)``.
+    """
     K = (np.shape(coeffs)[-1] - 1) // 2
     return np.einsum("pk,...ck->...pc", phase_design(phi, K), coeffs)
 

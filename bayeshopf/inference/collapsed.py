@@ -25,7 +25,6 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-import arviz as az
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -35,6 +34,7 @@ from numpyro.infer import MCMC, NUTS, SVI, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
 
+from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
 from bayeshopf.model import collapsed as cm
@@ -278,10 +278,7 @@ def convergence(chains: dict) -> dict:
     out = {}
     if next(iter(present.values())).shape[0] < 2:
         return out
-    rhat = az.rhat(az.convert_to_dataset(present))
-    ess = az.ess(az.convert_to_dataset(present), method="bulk")
-    for k in present:
-        r, e = float(rhat[k]), float(ess[k])
+    for k, (r, e) in rhat_ess(present).items():
         out[k] = {"r_hat": r, "ess_bulk": e, "ok": bool(r <= RHAT_MAX and e >= ESS_MIN)}
     return out
 

@@ -371,5 +371,6 @@ def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key)
 def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):
     """Predicted orbit ``w(φ)`` in the frame at one μ, shape ``phi.shape + (2,)``."""
     r = radius(spec, mu, sign, theta)
-    u = (r / reference_radius(spec, theta.get("a2", -1.0))) * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
+    scale = r / reference_radius(spec, theta.get("a2", -1.0))
+    u = scale * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
     return basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta
