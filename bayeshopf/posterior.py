@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.bifurcation import LEVELS, BifurcationDiagram, BranchBand
+from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, _quantiles
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import FitError
@@ -303,15 +303,6 @@ def amplitude_of(spec: cm.CollapsedSpec, coeffs) -> np.ndarray:
     phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     z1 = spec.frame.from_frame(reconstruct(coeffs, phi))[..., 0]
     return z1.max(axis=-1) - z1.min(axis=-1)
-
-
-def _quantiles(amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    exists = np.isfinite(amp)
-    p = exists.mean(axis=0)
-    q = np.full((len(LEVELS), amp.shape[1]), np.nan)
-    for j in np.flatnonzero(p >= 0.05):
-        q[:, j] = np.quantile(amp[exists[:, j], j], LEVELS)
-    return q, p
 
 
 def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None) -> dict:
