@@ -32,7 +32,7 @@ from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
 #: Phases per predicted orbit.
-N_PHI = 128
+N_PHI = 64
 #: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
 ORBIT_ERROR_MAX = 0.05
 #: ... or this many times its measured segment spread.
@@ -41,6 +41,12 @@ ORBIT_SPREAD_FACTOR = 2.0
 #: the channel's leading coefficients is reported as "the scatter is large
 #: against the measured spread".
 SIGMA_RATIO_MAX = 10.0
+#: ... when it is also above this fraction of the orbit scale ρ (a model error of
+#: 0.2% of the orbit is no misfit worth a warning, however clean the data).
+SIGMA_ORBIT_FRACTION = 0.01
+#: Relative model error σ_rel above which the fit is reported as missing the
+#: orbits' sizes (its prior scale: 2% of each coefficient).
+SIGMA_REL_MAX = 0.02
 #: Draws used for bands (quantiles at 5%–95% are stable with 500).
 N_BAND_DRAWS = 500
 
@@ -350,6 +356,8 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         "orbit_error": errs,
         "amplitude_covered": [bool(c) for c in covered],
         "sigma": sigma.tolist(), "sigma_over_measured_se": ratio.tolist(),
+        "sigma_over_orbit_scale": (sigma / post.spec.orbit_scale).tolist(),
+        "sigma_rel": float(np.median(post.samples["sigma_rel"])),
     }
     for e in errs:
         if not e["ok"]:
@@ -361,10 +369,15 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
     for name, c in zip(post.features.names, covered, strict=True):
         if not c:
             warnings.append(f"fit: {name}: measured amplitude outside its 90% predictive band")
-    for ch, r in zip(post.spec.frame.names, ratio, strict=True):
-        if r > SIGMA_RATIO_MAX:
+    for ch, r, sg in zip(post.spec.frame.names, ratio, sigma, strict=True):
+        if r > SIGMA_RATIO_MAX and sg > SIGMA_ORBIT_FRACTION * post.spec.orbit_scale:
             warnings.append(f"fit: model error of {ch} is {r:.0f}× its measured standard error: "
                             "the map does not fit the orbits, the bands are wide for that reason")
+    rel = d["fit"]["sigma_rel"]
+    if rel > SIGMA_REL_MAX:
+        warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
+                        f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
+                        "fraction, and the predictive bands are that wide for that reason")
     d["warnings"] = warnings
     return d
 

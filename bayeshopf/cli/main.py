@@ -107,6 +107,9 @@ def _settings(args):
 
 def _print_table(summary: dict, truth: dict | None = None) -> None:
     u, au = summary["mu_units"], summary["amplitude_units"]
+    curved = summary.get("unfolding") == "curved"
+    if truth and curved:  # a2 of a curved unfolding is not the linear one's 2√(μ0 − μ_SN)
+        truth = {**truth, "a2": None}
     print(f"criticality: {summary['criticality']}")
     evidence = summary.get("criticality_evidence")
     if evidence and "statement" in evidence:
@@ -123,6 +126,9 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
         t = "" if not truth or truth.get(k) is None else f" {truth[k]:10.4g}"
         unit = "" if k in ("a2", "a4", "w_unfold") else f" {u}"
         print(f"{k:8s} {v['median']:10.4g} [{v['ci90'][0]:10.4g}, {v['ci90'][1]:10.4g}]{t}{unit}")
+    if curved:
+        print("(curved unfolding β(μ) = (exp(b(μ−μ0)) − 1)/b, w = b(μ0 − μ_fold); a2 is its "
+              "cubic coefficient, β(μ_fold) = −a2²/4)")
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
           f"{'predicted (90%)':>30s}  [{au}]")

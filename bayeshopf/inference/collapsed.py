@@ -222,8 +222,10 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
     mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent)),
                 num_warmup=settings.num_warmup, num_samples=settings.num_samples,
-                num_chains=settings.num_chains, chain_method="vectorized",
-                progress_bar=False)  # numpyro's bar steps in Python: 2–3 times slower
+                num_chains=settings.num_chains, chain_method="sequential",
+                progress_bar=False)
+    # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
+    # an order of magnitude slower on CPU (the 3-DOF demo: 76 s against ~12 s)
     mcmc.run(key, **kwargs)
     chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
     divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
