@@ -225,7 +225,7 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
                 num_chains=settings.num_chains, chain_method="sequential",
                 progress_bar=False)
     # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
-    # an order of magnitude slower on CPU (the 3-DOF demo: 76 s against ~12 s)
+    # slow on CPU (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential)
     mcmc.run(key, **kwargs)
     chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
     divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
