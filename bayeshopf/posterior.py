@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import jax
 import jax.numpy as jnp
@@ -190,14 +191,24 @@ class HybridPosterior:
             unstable, fold, fold_iv = None, None, None
         return BifurcationDiagram(stable, unstable, interval(self.samples["mu0"]), fold, fold_iv)
 
+    @cached_property
+    def training_coefficients(self) -> tuple[np.ndarray, ...]:
+        """Predicted coefficient draws at each training recording, each ``(n, 2, 2K+1)``.
+
+        Computed once and shared by :meth:`ppc` and :meth:`orbit_error`.
+        """
+        f = self.features
+        return tuple(
+            self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+            for i in range(f.n_recordings))
+
     def ppc(self) -> PosteriorPredictiveCheck:
         """Posterior predictive check of each training recording (amplitudes and coefficients)."""
         f = self.features
         curve, pred, p_amp = [], [], []
         reps = []
         rng = np.random.default_rng(self.seed)
-        for i in range(f.n_recordings):
-            c = self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+        for i, c in enumerate(self.training_coefficients):
             rep = c + self._noise_sd(c, f.coeffs_se[i]) * rng.standard_normal(c.shape)
             reps.append(rep)
             a, ap = self._amplitude_of(c), self._amplitude_of(rep)
@@ -225,8 +236,7 @@ class HybridPosterior:
         f = self.features
         phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
         out = []
-        for i in range(f.n_recordings):
-            c = self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+        for i, c in enumerate(self.training_coefficients):
             c = c[np.all(np.isfinite(c), axis=(1, 2))]
             data = reconstruct(f.coeffs[i], phi)
             radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
@@ -435,7 +445,8 @@ def fit_hybrid(
     post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
                            timings=timings)
     t0 = time.perf_counter()
-    diag = diagnose(post)
+    # filled in place while the record is being built, so that the predicted
+    # coefficients cached for the checks serve the caller's ppc() too
+    post.diagnostics.update(diagnose(post))
     timings["diagnostics"] = time.perf_counter() - t0
-    return HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
-                           timings=timings, diagnostics=diag)
+    return post
