@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from jax.flatten_util import ravel_pytree
-from numpyro.infer import MCMC, NUTS, SVI, Trace_ELBO, init_to_value
+from numpyro.infer import MCMC, NUTS, SVI, Predictive, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
 
@@ -240,8 +240,6 @@ def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress
     k_run, k_draw = jax.random.split(key)
     res = svi.run(k_run, settings.svi_steps, progress_bar=progress, stable_update=True, **kwargs)
     draws = guide.sample_posterior(k_draw, res.params, sample_shape=(settings.n_svi_draws,))
-    from numpyro.infer import Predictive
-
     det = Predictive(cm.collapsed_model, posterior_samples=draws)(k_draw, **kwargs)
     det = {k: v for k, v in det.items()    # the deterministic sites (μ0, a2, the fold)
            if k not in draws and not k.startswith("marginal") and np.ndim(v) >= 1}
