@@ -28,7 +28,7 @@ from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import FitError
 from bayeshopf.features.orbits import DEFAULT_N_HARMONICS, OrbitFeatures, extract_features
 from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
-from bayeshopf.inference.init import build_spec, held_sites, initial_values
+from bayeshopf.inference.init import build_spec, initial_values
 from bayeshopf.inference.map import fit_map
 from bayeshopf.inference.multistart import mix, stacking_weights
 from bayeshopf.inference.results import MapResult, SviResult
@@ -56,13 +56,6 @@ class FitSettings:
             (:mod:`bayeshopf.inference.multistart`).
         nn_width: Neurons per hidden layer of the map's MLP.
         nn_depth: Hidden layers of the map's MLP.
-        hold_scatter: Hold the scatter σ at 1% of the orbit size for a first
-            MAP Adam phase (:func:`~bayeshopf.inference.init.held_sites`), so
-            that the map, not σ, takes up the misfit first. Off by default: on
-            the 3-DOF aerofoil it finds the better optima more often (held-out
-            coverage 126/140 against 119/140), but on the wind-tunnel rig the
-            better optimum bends the diagram (leave-one-out 3/7 against 5/7);
-            see ``benchmarks/calibration_hold_scatter.md`` and the README.
     """
 
     n_h: int = DEFAULT_N_HARMONICS
@@ -75,7 +68,6 @@ class FitSettings:
     n_starts: int = 4
     nn_width: int = 10
     nn_depth: int = 2
-    hold_scatter: bool = False
 
     @classmethod
     def fast(cls) -> FitSettings:
@@ -282,8 +274,7 @@ def fit(
 
     Stages: Fourier features of every recording; MAP by Adam then L-BFGS from
     data-driven starting values of the normal form and ``settings.n_starts``
-    random initial MLP weights (with ``settings.hold_scatter``, σ held small for
-    the first Adam phase); from each MAP point, SVI with a low-rank
+    random initial MLP weights; from each MAP point, SVI with a low-rank
     multivariate-normal autoguide; the approximations combined by stacking
     (:mod:`bayeshopf.inference.multistart`) into ``settings.n_draws``
     posterior draws. ``map`` is the start with the lowest negative log joint.
@@ -324,7 +315,6 @@ def fit(
         m = fit_map(
             hopf_model, kwargs, init, key=key_j[0],
             adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
-            hold=held_sites(spec) if settings.hold_scatter else None,
         )
         timings["map"] += time.perf_counter() - t0
         if not np.isfinite(m.losses[-1]):
@@ -399,7 +389,7 @@ def fit_point(
     map_result = fit_map(
         hopf_model, prep.model_kwargs, initial_values(prep.features, prep.spec), key=k_map,
         adam_steps=settings.adam_steps, lbfgs_steps=settings.lbfgs_steps, progress=progress,
-        regularised=regularised, hold=held_sites(prep.spec) if settings.hold_scatter else None,
+        regularised=regularised,
     )
     if not np.isfinite(map_result.losses[-1]):
         raise FitError("the point fit did not converge: the loss is not finite")

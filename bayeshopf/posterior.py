@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -26,9 +27,15 @@ from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, _q
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import FitError
-from bayeshopf.features.harmonics import HarmonicFeatures, extract_harmonics, reconstruct
+from bayeshopf.features.harmonics import (
+    HarmonicFeatures,
+    extract_harmonics,
+    reconstruct,
+    time_design,
+)
 from bayeshopf.inference import collapsed as ci
 from bayeshopf.inference.cache import enable_compilation_cache
+from bayeshopf.inference.speed import FrequencyBand, TimeSeriesBand
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
@@ -153,6 +160,102 @@ class HybridPosterior:
             rng = np.random.default_rng(self.seed)
             c = c + self._noise_sd(c, coeffs_se) * rng.standard_normal(c.shape)
         return self._amplitude_of(c)
+
+    # ----------------------------------------------------------------- frequency
+    @property
+    def has_frequency(self) -> bool:
+        """Whether the model includes the frequency ``Ω(r, μ)``."""
+        return self.run.gammas is not None
+
+    def frequency(self, mu, branch: str = "stable", predictive: bool = False,
+                  omega_se: float | None = None, n_draws: int | None = N_BAND_DRAWS
+                  ) -> np.ndarray:
+        """Frequency draws (Hz) at μ, ``(n, n_mu)``; ``nan`` where the branch does not exist.
+
+        The curve is ``Ω(r(μ), μ)/2π`` (:func:`~bayeshopf.model.collapsed.frequency`);
+        ``predictive=True`` adds a new recording's error ``N(0, σ_ω² + se²)``, with
+        ``omega_se`` its standard error (rad/s; by default the training median).
+
+        Raises:
+            FitError: For a fit without the frequency model.
+        """
+        if not self.has_frequency:
+            raise FitError("this fit has no frequency model (fitted with frequency=False)")
+        idx = self._draw_indices(n_draws)
+        se = float(np.median(self.features.omega_se)) if omega_se is None else omega_se
+        return frequency_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                               self.run.gammas[idx], mu, _sign(branch), predictive=predictive,
+                               omega_se=se, seed=self.seed)
+
+    def frequency_band(self, mu, branch: str = "stable", predictive: bool = False
+                       ) -> FrequencyBand:
+        """Median and 90% band of the frequency (Hz) on a μ grid.
+
+        ``nan`` where fewer than half the draws have the branch.
+        """
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        x = self.frequency(mu, branch, predictive)
+        ok = np.isfinite(x).mean(axis=0) >= 0.5
+        with warnings.catch_warnings():      # all-nan columns: no draw has the branch there
+            warnings.simplefilter("ignore", RuntimeWarning)
+            q = np.where(ok, np.nanquantile(x, [0.5, 0.05, 0.95], axis=0), np.nan)
+        return FrequencyBand(branch, mu, q[0], q[1], q[2])
+
+    def time_series(self, mu: float, branch: str, t, phase0: float = 0.0,
+                    n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
+        """Predicted planar channels (physical units) at times ``t``, ``(n, n_t, 2)``.
+
+        The orbit of each draw traversed at its own frequency,
+        ``w(Ω t + φ_0)``, with ``φ_0`` the phase at ``t = 0`` relative to the crest
+        of z1's fundamental (the features' phase origin).
+        """
+        c = self.orbit_coefficients([mu], branch, n_draws)[:, 0]             # (n, 2, 2K+1)
+        om = 2 * np.pi * self.frequency([mu], branch, n_draws=n_draws)[:, 0]  # (n,)
+        phi = om[:, None] * np.asarray(t, dtype=float)[None] + phase0        # (n, n_t)
+        K = self.spec.n_harmonics
+        X = time_design(phi.reshape(-1), 1.0, K).reshape(phi.shape + (2 * K + 1,))
+        return self.spec.frame.from_frame(np.einsum("ntk,nck->ntc", X, c))
+
+    def time_series_bands(self, recordings: RecordingSet, n_periods: float = 4.0,
+                          channel: int = 0) -> list[TimeSeriesBand]:
+        """Median and 90% band of one channel over the first ``n_periods`` of each recording.
+
+        Each prediction starts at the recording's phase at its first sample (the
+        crest of z1's fundamental, fitted over the window at the measured
+        frequency); the band then holds the frequency's and the orbit's uncertainty.
+        ``recordings`` are the training recordings, in the order of the features.
+        """
+        out = []
+        f = self.features
+        for i, r in enumerate(recordings):
+            z = r.planar(recordings.planar)
+            t = r.t - r.t[0]
+            om = float(f.omega[i])
+            stride = max(1, int(round(2 * np.pi / (om * 60 * r.dt))))
+            sel = np.flatnonzero(t <= n_periods * 2 * np.pi / om)[::stride]
+            w = self.spec.frame.to_frame(z[t <= n_periods * 2 * np.pi / om])
+            ab = np.linalg.lstsq(time_design(t[: w.shape[0]], om, 1), w[:, 0], rcond=None)[0]
+            phase0 = -float(np.arctan2(ab[2], ab[1]))
+            pred = self.time_series(r.mu, r.branch, t[sel], phase0)[..., channel]
+            q = np.nanquantile(pred, [0.5, 0.05, 0.95], axis=0)
+            name = recordings.planar[channel]
+            out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], t[sel],
+                                      z[sel, channel], q[0], q[1], q[2]))
+        return out
+
+    def frequency_check(self) -> list[dict]:
+        """Each recording's measured frequency against its 90% predictive band (Hz)."""
+        f = self.features
+        out = []
+        for i in range(f.n_recordings):
+            x = self.frequency([f.mu[i]], "unstable" if f.unstable[i] else "stable",
+                               predictive=True, omega_se=float(f.omega_se[i]))[:, 0]
+            x = x[np.isfinite(x)]
+            iv = interval(x) if x.size else None
+            out.append({"name": f.names[i], "measured_hz": float(f.frequency_hz[i]),
+                        "predicted": None if iv is None else iv.to_json(),
+                        "inside_ci90": bool(iv is not None and iv.contains(f.frequency_hz[i]))})
+        return out
 
     # ----------------------------------------------------------------- summaries
     def default_mu_grid(self, n: int = 120) -> np.ndarray:
@@ -302,6 +405,23 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     return np.asarray(_orbit_fn(spec)(th, jnp.asarray(betas), jnp.asarray(mu), float(sign)))
 
 
+def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float, *,
+                    predictive: bool = False, omega_se: float = 0.0, seed: int = 0
+                    ) -> np.ndarray:
+    """Frequency (Hz) draws ``(n, n_mu)`` at μ for draws ``(θ, γ)``; ``nan`` where no LCO.
+
+    With ``predictive``, each draw gets a new recording's error
+    ``N(0, σ_ω² + omega_se²)`` (rad/s).
+    """
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    th = {k: np.asarray(v)[:, None] for k, v in theta.items() if np.ndim(v) == 1}
+    om = np.asarray(cm.frequency(spec, th, np.asarray(gammas)[:, None, :], mu, float(sign)))
+    if predictive:
+        sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
+        om = om + sd * np.random.default_rng(seed).standard_normal(om.shape)
+    return om / (2 * np.pi)
+
+
 def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
     """``√(se² + σ_c² + (σ_rel c)²)`` for predicted coefficients ``(n, ..., 2, 2K+1)``.
 
@@ -329,7 +449,8 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
       the thresholds, divergences; SVI: the ELBO-plateau test.
     * ``fit``: each recording's orbit error (``orbit_error``), whether its
       amplitude lies in its 90% predictive band, and each channel's model error
-      σ against the measured standard errors.
+      σ against the measured standard errors; with the frequency model, whether
+      each measured frequency lies in its 90% predictive band.
     """
     warnings = []
     mp = post.map_point
@@ -383,6 +504,12 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         if r > SIGMA_RATIO_MAX and sg > SIGMA_ORBIT_FRACTION * post.spec.orbit_scale:
             warnings.append(f"fit: model error of {ch} is {r:.0f}× its measured standard error: "
                             "the map does not fit the orbits, the bands are wide for that reason")
+    if post.has_frequency:
+        d["fit"]["frequency"] = post.frequency_check()
+        for e in d["fit"]["frequency"]:
+            if not e["inside_ci90"]:
+                warnings.append(f"fit: {e['name']}: measured frequency {e['measured_hz']:.4g} Hz "
+                                "outside its 90% predictive band")
     rel = d["fit"]["sigma_rel"]
     if rel > SIGMA_REL_MAX:
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
@@ -432,7 +559,8 @@ def fit_hybrid(
         features = recordings
         labels = "mu", "", features.frame.units[0]
     spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
-                         unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1])
+                         unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
+                         frequency=settings.frequency)
     kwargs = ci.model_arguments(spec, features)
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -223,6 +223,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
     diag = post.diagnostics
     errors = {e["name"]: e for e in diag["fit"]["orbit_error"]}
     f = post.features
+    freq = diag["fit"].get("frequency")
     recs = []
     for i, name in enumerate(f.names):
         recs.append({
@@ -233,6 +234,8 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
             "predicted": ppc.predictive[i].to_json(), "curve": ppc.curve[i].to_json(),
             "inside_ci90": bool(ppc.covered[i]),
             "frequency_hz": float(f.frequency_hz[i]),
+            "frequency_predicted": freq[i]["predicted"] if freq else None,
+            "frequency_inside_ci90": freq[i]["inside_ci90"] if freq else None,
             "orbit_error": {k: errors[name][k] for k in ("relative", "spread", "ok")},
         })
 
@@ -253,6 +256,8 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
         "recordings": recs,
         "orbit_error": [errors[n] for n in f.names],
         "ppc": {"amplitudes_inside_ci90": int(ppc.covered.sum()),
+                "frequencies_inside_ci90": (sum(e["inside_ci90"] for e in freq)
+                                            if freq else None),
                 "n_recordings": int(ppc.covered.size),
                 "coefficients_inside_ci90": ppc.coeff_coverage},
         "map": {k: _finite_or_none(float(np.asarray(post.map_point.params[k])))
@@ -274,9 +279,10 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
                 ppc=None, extra_summary: dict | None = None) -> Path:
     """Write a collapsed-core fit folder atomically (as :func:`save_fit`).
 
-    ``posterior.nc`` holds the draws by chain of every site and the map's
-    coefficients ``beta`` (one exact draw per posterior draw); ``model.json``
-    the model structure and the predictive standard errors of a new recording.
+    ``posterior.nc`` holds the draws by chain of every site, the map's
+    coefficients ``beta`` and the frequency's ``gamma`` (one exact draw per
+    posterior draw); ``model.json`` the model structure and the predictive
+    standard errors of a new recording.
     """
     def write(stage: Path) -> None:
         nonlocal post
@@ -284,11 +290,14 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         _write_json(summary_hybrid(post, ppc, extra_summary), stage / SUMMARY)
         model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
                  "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),
+                 "predictive_omega_se": float(np.median(post.features.omega_se)),
                  "seed": post.seed}
         _write_json(model, stage / MODEL)
         chains = {k: v for k, v in post.run.chains.items() if not k.startswith("marginal")}
         n_chain, n_draw = next(iter(chains.values())).shape[:2]
         chains["beta"] = post.run.betas.reshape((n_chain, n_draw) + post.run.betas.shape[1:])
+        if post.run.gammas is not None:
+            chains["gamma"] = post.run.gammas.reshape((n_chain, n_draw) + post.run.gammas.shape[1:])
         idata = arviz_io.chains_to_inference_data(
             chains,
             observed={"coeffs": post.features.coeffs},
@@ -312,6 +321,7 @@ class SavedHybrid:
         samples: Posterior draws of every site (``beta``: the map's coefficients).
         summary: The content of ``summary.json``.
         predictive_se: Standard errors of a new recording's coefficients.
+        predictive_omega_se: Standard error of a new recording's frequency (rad/s).
     """
 
     folder: Path
@@ -319,13 +329,33 @@ class SavedHybrid:
     samples: dict
     summary: dict
     predictive_se: np.ndarray
+    predictive_omega_se: float = 0.0
+
+    def frequency(self, mu: float, branch: str = "stable", predictive: bool = False
+                  ) -> Interval | None:
+        """Frequency (Hz) median and 90% interval at μ, or ``None``.
+
+        ``None`` without a frequency model, or where no draw has the branch.
+        """
+        from bayeshopf import posterior as bp
+
+        if "gamma" not in self.samples:
+            return None
+        idx = bp.draw_indices(len(self.samples["gamma"]))
+        theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
+        f = bp.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
+                               bp._sign(branch), predictive=predictive,
+                               omega_se=self.predictive_omega_se,
+                               seed=int(self.summary.get("seed", 0)))[:, 0]
+        f = f[np.isfinite(f)]
+        return interval(f) if f.size else None
 
     def _draws(self, mu: float, branch: str, predictive: bool) -> np.ndarray:
         from bayeshopf import posterior as bp
 
         idx = bp.draw_indices(len(self.samples["beta"]))   # the draws the summary used
         s = {k: v[idx] for k, v in self.samples.items()}
-        theta = {k: v for k, v in s.items() if k != "beta"}
+        theta = {k: v for k, v in s.items() if k not in ("beta", "gamma")}
         c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp._sign(branch))
         if predictive:
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
@@ -419,5 +449,6 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
     except Exception as e:  # netCDF/HDF5 raise many types
         raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
     if model.get("core") == COLLAPSED_CORE:
-        return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]))
+        return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]),
+                           float(model.get("predictive_omega_se", 0.0)))
     return SavedFit(folder, spec, samples, summary)

@@ -26,11 +26,9 @@ table to ``benchmarks/calibration.md``::
 
     python benchmarks/bench_calibration.py                # 20 seeds, default settings
     python benchmarks/bench_calibration.py --fast -n 5    # FitSettings.fast(), a quick check
-    python benchmarks/bench_calibration.py --hold-scatter --json J --md M  # σ held first
     nohup python benchmarks/bench_calibration.py --resume > calibration.log 2>&1 &
 
-Fits run one after another. ``benchmarks/calibration_hold_scatter.md`` holds the
-``--hold-scatter`` run (``FitSettings(hold_scatter=True)``).
+Fits run one after another.
 """
 
 from __future__ import annotations
@@ -43,7 +41,6 @@ import platform
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -74,15 +71,13 @@ def clopper_pearson(k: int, n: int, mass: float = 0.9) -> tuple[float, float]:
     return lo, hi
 
 
-def run_seed(seed: int, fast: bool, hold_scatter: bool = False) -> dict:
+def run_seed(seed: int, fast: bool) -> dict:
     """Simulate, fit and check one seed; a JSON-serialisable record."""
     from bayeshopf.pipeline import FitSettings, fit
     from bayeshopf.simulators.truth import flutter_experiment, held_out_check
 
     rs, truth = flutter_experiment(seed)
     settings = FitSettings.fast() if fast else FitSettings()
-    if hold_scatter:
-        settings = replace(settings, hold_scatter=True)
     t0 = time.perf_counter()
     result = fit(rs, "subcritical", seed=seed, settings=settings, progress=False)
     fit_s = time.perf_counter() - t0
@@ -208,8 +203,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-n", "--seeds", type=int, default=20, help="number of seeds (default 20)")
     ap.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
     ap.add_argument("--fast", action="store_true", help="FitSettings.fast() instead of defaults")
-    ap.add_argument("--hold-scatter", action="store_true",
-                    help="FitSettings(hold_scatter=True): σ held small for the first MAP phase")
     ap.add_argument("--resume", action="store_true",
                     help="keep the seeds already in the JSON (same settings) and run the rest")
     ap.add_argument("--json", type=Path, default=DEFAULT_JSON, help="results JSON")
@@ -222,8 +215,6 @@ def main(argv: list[str] | None = None) -> int:
 
     enable_compilation_cache()
     settings = "FitSettings.fast()" if args.fast else "FitSettings() defaults"
-    if args.hold_scatter:
-        settings += ", hold_scatter=True"
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     records: list[dict] = []
     runtime_before = 0.0
@@ -241,7 +232,6 @@ def main(argv: list[str] | None = None) -> int:
         "settings": settings,
         "plan": ", ".join(f"{b} {m:g}" for m, b in FLUTTER_PLAN),
         "command": "python benchmarks/bench_calibration.py" + (" --fast" if args.fast else "")
-        + (" --hold-scatter" if args.hold_scatter else "")
         + (f" -n {args.seeds}" if args.seeds != 20 else ""),
     }
 
@@ -258,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
         if seed in done:
             continue
         load = os.getloadavg()[0]
-        rec = run_seed(seed, args.fast, args.hold_scatter)
+        rec = run_seed(seed, args.fast)
         rec["load_avg"] = load
         records.append(rec)
         print(f"seed {seed}: " + ", ".join(

@@ -185,7 +185,8 @@ def test_fit_writes_summary_posterior_figures(fitted, good_data):
     assert all(set(r["orbit_error"]) == {"relative", "spread", "ok"} for r in s["recordings"])
     assert (fitted / "posterior.nc").stat().st_size > 1000
     pngs = sorted(p.name for p in (fitted / "figures").glob("*.png"))
-    assert pngs == ["bifurcation.png", "phase_portraits.png", "ppc.png"]
+    assert pngs == sorted(["bifurcation.png", "phase_portraits.png", "ppc.png", "frequency.png",
+                           "time_series.png"])
     assert not [p for p in fitted.parent.iterdir() if p.name.startswith(".")]
 
 
@@ -208,6 +209,13 @@ def test_predict_json_matches_summary(fitted, capsys):
     assert lo <= out["amplitude"]["median"] <= hi
     # the curve's band at a training μ is the one in the summary
     assert out["amplitude"]["median"] == pytest.approx(rec["curve"]["median"], rel=1e-6)
+    # the collapsed core models the frequency too: its band at a training μ holds a median
+    # within 5% of that recording's measured frequency
+    assert s["core"] == "collapsed"
+    freq = out["frequency_hz"]
+    lo, hi = freq["ci90"]
+    assert lo <= freq["median"] <= hi, freq
+    assert freq["median"] == pytest.approx(abs(rec["frequency_hz"]), rel=0.05), (freq, rec)
 
 
 def test_predict_unstable_beyond_hopf_is_clear_error(fitted, capsys):

@@ -232,6 +232,8 @@ def test_example_script_runs_in_fast_mode(tmp_path):
     assert (tmp_path / "mp" / "blind" / "report.json").is_file()
 
 
+@pytest.mark.slow  # its fast mode repeats the default blind tests above (quadratic damping in
+# pitch, no effect, delayed_aero) in a fresh kernel
 @pytest.mark.notebooks
 def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
     import shutil

@@ -18,8 +18,9 @@ def planted():
 
 @pytest.fixture(scope="module")
 def result(planted):
+    """Default settings but two MAP starts instead of four (stacking needs more than one)."""
     rs, _ = planted
-    return fit(rs, "subcritical", seed=0, settings=FitSettings(), progress=False)
+    return fit(rs, "subcritical", seed=0, settings=FitSettings(n_starts=2), progress=False)
 
 
 def test_map_recovers_mu0_a2(result, planted):
@@ -73,9 +74,12 @@ def test_curve_band_covers_true_diagram(result, planted):
 
 
 def test_reproducible_from_seed(planted):
+    """Two fits from one seed give identical draws and losses (short runs: only the equality
+    of every random choice is checked here, not convergence)."""
     rs, _ = planted
-    a = fit(rs, "subcritical", seed=5, settings=FitSettings.fast(), progress=False)
-    b = fit(rs, "subcritical", seed=5, settings=FitSettings.fast(), progress=False)
+    short = FitSettings(adam_steps=60, lbfgs_steps=20, svi_steps=60, n_draws=50, n_starts=2)
+    a = fit(rs, "subcritical", seed=5, settings=short, progress=False)
+    b = fit(rs, "subcritical", seed=5, settings=short, progress=False)
     np.testing.assert_array_equal(a.samples["mu0"], b.samples["mu0"])
     np.testing.assert_array_equal(a.map.losses, b.map.losses)
 
@@ -121,24 +125,6 @@ def test_supercritical_gauge_fits_a_planted_quintic_system():
     assert abs(res.interval("mu0").median - 18.0) < 0.01, res.interval("mu0")
     assert res.interval("a4").hi < 0
     assert res.ppc().covered.all()
-
-
-def test_hold_scatter_holds_sigma_for_a_first_phase_and_then_frees_it(planted):
-    """``FitSettings(hold_scatter=True)``: σ at 1% of ρ for the first Adam phase, then free."""
-    from dataclasses import replace
-
-    from bayeshopf.inference.init import HELD_SCATTER_FRACTION
-    from bayeshopf.pipeline import fit_point
-
-    rs, truth = planted
-    settings = replace(FitSettings.fast(), hold_scatter=True)
-    pf = fit_point(rs, "subcritical", settings=settings, progress=False)
-    m = pf.map
-    assert m.n_adam == settings.adam_steps + settings.adam_steps // 2
-    assert m.losses.size == m.n_adam + settings.lbfgs_steps and np.isfinite(m.losses[-1])
-    held = HELD_SCATTER_FRACTION * pf.spec.orbit_scale
-    assert not np.allclose(m.params["sigma"], held)  # released after the first phase
-    assert abs(float(m.params["mu0"]) - truth.mu0) < 0.05
 
 
 # --- NUTS chains from the MAP point (bayeshopf.inference.nuts) ---

@@ -159,6 +159,8 @@ def test_numerical_examples_script_runs_in_fast_mode(tmp_path):
     assert len(list(tmp_path.glob("vanderpol_*.png"))) == 3
 
 
+@pytest.mark.slow  # two fast fits and six figures in a fresh kernel: the script test above
+# runs the same steps on the Van der Pol example, demo --fast fits the 3-DOF recordings
 @pytest.mark.notebooks
 def test_numerical_examples_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
     nbformat = pytest.importorskip("nbformat")

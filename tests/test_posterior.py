@@ -63,3 +63,33 @@ def test_a_fit_that_does_not_fit_says_so():
     bad = RecordingSet(recs, rs.planar, rs.mu_label, rs.mu_units)
     post = fit_hybrid(bad, "subcritical", seed=0, settings=SETTINGS, progress=False)
     assert any(w.startswith("fit:") for w in post.diagnostics["warnings"])
+
+
+def test_planted_frequency_curve_inside_its_band_and_recordings_in_theirs(planted):
+    """Ω(r, μ) against the planted ω0 (1 + κ r²): the curve band holds the truth."""
+    post, _, truth = planted
+    for branch in ("stable", "unstable"):
+        lo_mu, hi_mu = (post.features.mu[post.features.unstable == (branch == "unstable")]
+                        .min(), post.features.mu.max())
+        mu = np.linspace(lo_mu, hi_mu, 8)
+        band = post.frequency_band(mu, branch)
+        true = truth.frequency_hz(mu, branch)
+        ok = np.isfinite(true)
+        assert np.all((band.lo[ok] <= true[ok]) & (true[ok] <= band.hi[ok])), (branch, band, true)
+        # and the band is narrow against the frequency's change over the branch
+        assert np.nanmax(band.hi - band.lo) < 0.5 * (np.nanmax(true) - np.nanmin(true))
+    checks = post.diagnostics["fit"]["frequency"]
+    assert sum(c["inside_ci90"] for c in checks) >= len(checks) - 1
+
+
+def test_predicted_time_series_follows_the_recording(planted):
+    """Started at the recording's phase, the median time series stays on the measured one."""
+    post, rs, _ = planted
+    bands = post.time_series_bands(rs, n_periods=3.0)
+    assert len(bands) == len(rs)
+    for b in bands:
+        scale = np.ptp(b.measured)
+        err = np.sqrt(np.mean((b.median - b.measured) ** 2)) / scale
+        assert err < 0.05, (b.name, err)
+        # the curve band (no measurement noise) is narrow against the oscillation
+        assert np.max(b.hi - b.lo) < 0.1 * scale, b.name

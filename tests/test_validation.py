@@ -50,3 +50,43 @@ def test_band_edges_count_as_inside_and_errors_are_relative():
     s = _study(6).summary()["bayes"]
     assert s["max_relative_error"] == pytest.approx(0.5)  # (2.0 − 1.0)/2.0
     assert s["mu_fold_range"] == pytest.approx([14.6, 14.65])
+
+
+def test_leave_one_out_refits_without_the_held_out_recording_and_predicts_it():
+    """One fold of :func:`leave_one_out` on the fast demo set (fast settings, all three methods).
+
+    The rig's seven-fold study at default settings is the slow test in
+    test_wind_tunnel_validation; here one interior stable orbit is held out.
+    """
+    import json
+
+    import numpy as np
+
+    from bayeshopf.data.synthetic import demo_system
+    from bayeshopf.pipeline import FitSettings
+    from bayeshopf.validation import leave_one_out
+
+    rs, truth = demo_system(seed=0, fast=True)
+    name = "stable_mu16.70"
+    loo = leave_one_out(rs, "subcritical", seed=0, settings=FitSettings.fast(), folds=[name],
+                        keep_fits=True, progress=False)
+    assert loo.methods == ("bayes", "map", "ml") and len(loo.folds) == 1
+    (fold,) = loo.folds
+    assert (fold.name, fold.mu, fold.branch) == (name, 16.7, "stable")
+    for m in loo.methods:                 # every fit was made without the held-out recording
+        assert name not in fold.fits[m].features.names
+        assert fold.fits[m].features.mu.size == len(rs) - 1
+        p = fold.predictions[m]
+        assert p.lo <= p.median <= p.hi and p.p_exists == 1.0
+    # an interior orbit of a planted system: the Bayesian band holds it, and the truth
+    assert fold.inside("bayes"), (fold.predictions["bayes"], fold.measured)
+    bayes = fold.predictions["bayes"]
+    assert bayes.lo <= float(truth.amplitude(16.7, "stable")) <= bayes.hi
+    assert fold.relative_error("bayes") < 0.05
+    # (fast settings give a fold interval only ~0.002 m/s wide: its median is checked)
+    assert abs(bayes.mu_fold[0] - truth.mu_fold) < 0.05, bayes.mu_fold
+    # the point fits' folds have no width
+    assert fold.predictions["ml"].mu_fold[1] == fold.predictions["ml"].mu_fold[2]
+    rows = json.loads(json.dumps(loo.table()))
+    assert rows[0]["file"] == name and {"bayes", "map", "ml"} <= set(rows[0])
+    assert all(np.isfinite(rows[0][m]["median"]) for m in loo.methods)

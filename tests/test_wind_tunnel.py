@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from bayeshopf.data import load_recordings
 from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
-from bayeshopf.pipeline import fit
-
-CBC_DIR = (Path(__file__).parents[1] / ".." / "shared" / "data" / "flutter_cbc").resolve()
+from bayeshopf.pipeline import FitSettings
 
 
 @pytest.fixture(scope="module")
-def result():
-    if not CBC_DIR.is_dir():
-        pytest.skip(f"flutter CBC recordings not found at {CBC_DIR}")
-    return fit(load_recordings(CBC_DIR), "subcritical", seed=0, progress=False)
+def result(cbc_auto):
+    """``fit(rs, "subcritical", seed=0)`` at default settings: the subcritical fit that
+    ``fit_auto`` made and preferred (conftest's ``cbc_auto``, shared with
+    test_wind_tunnel_validation)."""
+    res, evidence = cbc_auto
+    assert res.criticality == "subcritical", evidence["statement"]
+    assert res.settings == FitSettings() and res.seed == 0
+    return res
 
 
 def test_subcritical_diagram_contains_all_seven_amplitudes(result):

@@ -17,8 +17,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayeshopf.data import load_recordings
-from bayeshopf.pipeline import fit_auto
 from bayeshopf.validation import leave_one_out
 
 REPO = Path(__file__).resolve().parent.parent
@@ -27,10 +25,8 @@ PAPER_FOLD = 14.66
 
 
 @pytest.fixture(scope="module")
-def recordings():
-    if not CBC_DIR.is_dir():
-        pytest.skip(f"flutter CBC recordings not found at {CBC_DIR}")
-    return load_recordings(CBC_DIR)
+def recordings(cbc_recordings):
+    return cbc_recordings
 
 
 @pytest.fixture(scope="module")
@@ -99,8 +95,10 @@ def test_loo_table_is_json_ready(loo):
 
 
 @pytest.fixture(scope="module")
-def auto(recordings):
-    return fit_auto(recordings, seed=0, progress=False)
+def auto(cbc_auto):
+    """``fit_auto(recordings, seed=0)`` at default settings (conftest: made once, shared with
+    test_wind_tunnel)."""
+    return cbc_auto
 
 
 def test_criticality_from_the_data_is_subcritical(auto):
@@ -122,14 +120,14 @@ def test_criticality_from_the_data_is_subcritical(auto):
     "issue 4: PSIS-LOO prefers the subcritical model by only 15.8 ± 8.8 in ELPD (1.8 SE; "
     "Pareto k 1.51 and 2.08), and exact refits where k > 0.7 bring it to 0.3 ± 7.7 "
     "(benchmarks/criticality.md): the supercritical model takes the orbits that share an "
-    "airspeed (14.9 and 16.5 m/s) for scatter. FitSettings(hold_scatter=True) gives "
-    "66.3 ± 11.9 by PSIS but a worse leave-one-out (3/7), so it is not the default (README)"))
+    "airspeed (14.9 and 16.5 m/s) for scatter (README, Limits)"))
 def test_criticality_elpd_alone_is_clear(auto):
     _, evidence = auto
     assert evidence["elpd_preferred"] == "subcritical"
     assert evidence["elpd_diff"] > 2.0 * evidence["dse"], evidence["statement"]
 
 
+@pytest.mark.slow  # the same calls as notebook 03 in its fast mode (below)
 @pytest.mark.notebooks
 def test_wind_tunnel_example_runs_in_fast_mode(tmp_path, recordings):
     env = {**os.environ, "BAYESHOPF_FAST": "1", "MPLBACKEND": "Agg"}
@@ -148,6 +146,9 @@ def test_wind_tunnel_example_runs_in_fast_mode(tmp_path, recordings):
 NOTEBOOK = REPO / "notebooks" / "03_wind_tunnel.ipynb"
 
 
+@pytest.mark.slow  # its calls run by default on smaller problems: fit_auto (above, default
+# settings), leave_one_out (test_validation, one fold of the demo set), fit_channel
+# (test_channels) and fit_speed (test_speed)
 @pytest.mark.notebooks
 def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, recordings):
     nbformat = pytest.importorskip("nbformat")

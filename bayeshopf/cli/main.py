@@ -141,6 +141,12 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
     print(f"\n{ppc['amplitudes_inside_ci90']}/{ppc['n_recordings']} measured amplitudes inside "
           f"their 90% predictive intervals; {100 * ppc['coefficients_inside_ci90']:.0f}% of the "
           "Fourier coefficients inside theirs.")
+    if ppc.get("frequencies_inside_ci90") is not None:
+        freqs = [r["frequency_predicted"] for r in summary["recordings"]]
+        lo = min(f["ci90"][0] for f in freqs if f)
+        hi = max(f["ci90"][1] for f in freqs if f)
+        print(f"{ppc['frequencies_inside_ci90']}/{ppc['n_recordings']} measured frequencies "
+              f"inside their 90% predictive intervals (Ω(r, μ); bands span {lo:.4g}–{hi:.4g} Hz).")
     _print_nuts_check(summary)
     _print_diagnostics(summary)
 
@@ -341,12 +347,14 @@ def cmd_predict(args) -> int:
 
 
 def _frequency(saved, mu: float, branch: str, predictive: bool = False):
-    """Frequency interval (Hz) at μ when the fit folder has a speed model, else ``None``."""
+    """Frequency interval (Hz) at μ when the fit folder has a frequency model, else ``None``."""
     import numpy as np
 
     from bayeshopf.diagnostics.summaries import interval
     from bayeshopf.inference.speed import frequency_draws, load_speed_draws
 
+    if hasattr(saved, "frequency"):          # the collapsed core: Ω(r, μ) in the model
+        return saved.frequency(mu, branch, predictive)
     loaded = load_speed_draws(saved.folder)
     if loaded is None:
         return None
@@ -366,8 +374,9 @@ def main(argv: list[str] | None = None) -> int:
     from bayeshopf.errors import BayesHopfError
 
     try:
-        from bayeshopf.inference.cache import enable_compilation_cache
+        from bayeshopf.inference.cache import enable_compilation_cache, single_thread_eigen
 
+        single_thread_eigen()       # before any JAX work: XLA's Eigen pool stalls on CPU
         enable_compilation_cache()  # before any JAX work, so every compilation is cached
         return COMMANDS[args.command](args)
     except BayesHopfError as e:

@@ -46,6 +46,31 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
     return target
 
 
+#: XLA flag that keeps the CPU backend's Eigen work on one thread per computation.
+SINGLE_THREAD_EIGEN = "--xla_cpu_multi_thread_eigen=false"
+
+
+def single_thread_eigen() -> bool:
+    """Add :data:`SINGLE_THREAD_EIGEN` to ``XLA_FLAGS`` unless the user set that flag.
+
+    With XLA's multithreaded Eigen pool, jaxlib 0.10 on CPU now and then stalls
+    for minutes (or hangs) compiling or running the NUTS programs: on the rig the
+    same 4-chain NUTS stage took 13 s in one process and 270–410 s in others, and
+    one run waited with every thread idle (PyAutoFit's issue #1528 describes the
+    same stall and the same cure). The models here are small, so one thread per
+    computation costs nothing measurable. Takes effect only before JAX's first
+    computation in the process (the CLI and the test suite call it first).
+
+    Returns:
+        Whether the flag is now in ``XLA_FLAGS``.
+    """
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_multi_thread_eigen" in flags:
+        return SINGLE_THREAD_EIGEN in flags
+    os.environ["XLA_FLAGS"] = f"{flags} {SINGLE_THREAD_EIGEN}".strip()
+    return True
+
+
 def release_compiled() -> None:
     """Drop every in-memory compiled program (bayeshopf's per-spec jits and JAX's caches).
 

@@ -64,9 +64,13 @@ class CollapsedSettings:
         num_chains: NUTS chains.
         num_warmup: NUTS warm-up steps per chain.
         num_samples: NUTS draws per chain.
+        dense_mass: Adapt a dense mass matrix (the gaps, ``w`` and ``τ_μ`` are
+            correlated: on the rig it halves the tree size and doubles the ESS
+            per draw against a diagonal one; ``benchmarks/nuts_mass.json``).
         svi_steps: SVI steps (``inference="svi"``).
         n_svi_draws: Draws of the SVI posterior.
         lbfgs_steps: Most L-BFGS steps of the MAP.
+        frequency: Whether the model includes the frequency ``Ω(r, μ)``.
     """
 
     n_harmonics: int = 4
@@ -77,9 +81,11 @@ class CollapsedSettings:
     num_chains: int = 4
     num_warmup: int = 500
     num_samples: int = 500
+    dense_mass: bool = True
     svi_steps: int = 3000
     n_svi_draws: int = 2000
     lbfgs_steps: int = 300
+    frequency: bool = True
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
@@ -90,7 +96,7 @@ class CollapsedSettings:
 
 def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
                unfolding: str = "curved", mu_label: str = "mu",
-               mu_units: str = "") -> cm.CollapsedSpec:
+               mu_units: str = "", frequency: bool = True) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
 
     Raises:
@@ -119,6 +125,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         orbit_scale=float(np.median(rms)), nn_hidden=cm.hidden_layer(nn_width),
         mu_label=mu_label, mu_units=mu_units,
         unfolding=unfolding if criticality == "subcritical" else "linear",
+        omega_centre=float(np.mean(features.omega)) if frequency else None,
     )
 
 
@@ -126,7 +133,8 @@ def model_arguments(spec: cm.CollapsedSpec, features: HarmonicFeatures) -> dict:
     """Keyword arguments of :func:`~bayeshopf.model.collapsed.collapsed_model`."""
     return dict(spec=spec, mu=jnp.asarray(features.mu),
                 sign=jnp.asarray(np.where(features.unstable, -1.0, 1.0)),
-                coeffs=jnp.asarray(features.coeffs), coeffs_se=jnp.asarray(features.coeffs_se))
+                coeffs=jnp.asarray(features.coeffs), coeffs_se=jnp.asarray(features.coeffs_se),
+                omega=jnp.asarray(features.omega), omega_se=jnp.asarray(features.omega_se))
 
 
 def _initial_values(spec: cm.CollapsedSpec) -> dict:
@@ -134,6 +142,8 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
          "sigma": np.full(2, 0.5 * cm.SIGMA_PRIOR * spec.orbit_scale),
          "sigma_rel": 0.5 * cm.SIGMA_REL_PRIOR,
          "gap_hopf": 0.3 * spec.mu_span}
+    if spec.omega_centre is not None:
+        v["sigma_omega"] = 0.5 * cm.SIGMA_OMEGA_PRIOR * spec.omega_centre
     if spec.criticality == "subcritical":
         v["gap_fold"] = 0.3 * spec.mu_span
         if spec.unfolding == "curved":
@@ -220,12 +230,14 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
 
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
     latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
-    mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent)),
+    mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent),
+                     dense_mass=settings.dense_mass),
                 num_warmup=settings.num_warmup, num_samples=settings.num_samples,
-                num_chains=settings.num_chains, chain_method="sequential",
-                progress_bar=False)
+                num_chains=settings.num_chains, chain_method="sequential", progress_bar=False)
     # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
-    # slow on CPU (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential)
+    # slow on CPU (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential);
+    # not parallel either: one CPU device per chain (pmap) took 31 s on the rig's
+    # 2 cores against 13 s sequential
     mcmc.run(key, **kwargs)
     chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
     divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
@@ -260,16 +272,30 @@ def elbo_plateau(losses: np.ndarray, frac: float = 0.1) -> dict:
     return {"drop": diff, "se": se, "plateau": bool(diff < 2 * se)}
 
 
-def _sample_maps(spec, kwargs, theta: dict, key) -> np.ndarray:
-    """One exact draw of the map's coefficients per posterior draw, ``(n, J, 2)``."""
+def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray | None]:
+    """One exact draw of the map's (and the frequency's) coefficients per posterior draw.
+
+    Returns:
+        ``β`` ``(n, J, 2)`` and ``γ`` ``(n, 4)`` (``None`` without the frequency model).
+    """
     n = len(next(iter(theta.values())))
     keys = jax.random.split(key, n)
     th = {k: jnp.asarray(v) for k, v in theta.items()}
+    with_freq = spec.omega_centre is not None
+
+    def one(a):
+        t, k = a
+        k_map, k_freq = jax.random.split(k)
+        beta = cm.draw_map(spec, t, kwargs["mu"], kwargs["sign"], kwargs["coeffs"],
+                           kwargs["coeffs_se"], k_map)
+        if not with_freq:
+            return beta, jnp.zeros(0)
+        return beta, cm.draw_frequency(spec, t, kwargs["mu"], kwargs["sign"], kwargs["omega"],
+                                       kwargs["omega_se"], k_freq)
+
     # lax.map, not vmap: XLA's batched triangular solves hang on CPU
-    run = jax.jit(lambda th, keys: jax.lax.map(
-        lambda a: cm.draw_map(spec, a[0], kwargs["mu"], kwargs["sign"], kwargs["coeffs"],
-                              kwargs["coeffs_se"], a[1]), (th, keys)))
-    return np.asarray(run(th, keys))
+    betas, gammas = jax.jit(lambda th, keys: jax.lax.map(one, (th, keys)))(th, keys)
+    return np.asarray(betas), np.asarray(gammas) if with_freq else None
 
 
 def convergence(chains: dict) -> dict:
@@ -291,6 +317,8 @@ class PosteriorRun:
         method: ``"nuts"`` or ``"svi"``.
         chains: Draws of every site, ``(n_chains, n_draws, ...)`` (SVI: one chain).
         betas: Map coefficients, one exact draw per posterior draw, ``(n, J, 2)``.
+        gammas: Frequency coefficients, one exact draw per posterior draw, ``(n, 4)``,
+            or ``None`` without the frequency model.
         divergences: NUTS divergent transitions (0 for SVI).
         losses: SVI −ELBO per step (empty for NUTS).
         seconds: Wall time of the stage.
@@ -299,6 +327,7 @@ class PosteriorRun:
     method: str
     chains: dict
     betas: np.ndarray
+    gammas: np.ndarray | None = None
     divergences: int = 0
     losses: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seconds: float = 0.0
@@ -330,8 +359,8 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
         div = 0
     pooled = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()}
     theta = {k: v for k, v in pooled.items() if not k.startswith("marginal")}
-    betas = _sample_maps(kwargs["spec"], kwargs, theta, k_map)
-    return PosteriorRun(method, chains, betas, div, losses, time.perf_counter() - t0)
+    betas, gammas = _sample_maps(kwargs["spec"], kwargs, theta, k_map)
+    return PosteriorRun(method, chains, betas, gammas, div, losses, time.perf_counter() - t0)
 
 
 #: SVI's interval ends may differ from NUTS's by this fraction of NUTS's width.

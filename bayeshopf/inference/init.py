@@ -137,15 +137,3 @@ def initial_values(features: OrbitFeatures, spec: ModelSpec) -> dict:
         v["gap_hopf"], v["kappa"] = np.exp(x[:2])
     return {k: np.asarray(val, dtype=np.float64) for k, val in v.items()}
 
-
-#: The scatter σ_k held during the first MAP phase, as a fraction of the orbit
-#: scale ρ: a tenth of σ's prior scale (0.1 ρ), below the model error of every
-#: data set we fit (the posterior σ_k of the leading harmonics are 0.005–0.05 ρ),
-#: so the map must fit the orbits before σ may explain what is left
-#: (:mod:`bayeshopf.inference.map`).
-HELD_SCATTER_FRACTION = 0.01
-
-
-def held_sites(spec: ModelSpec) -> dict:
-    """Sites held fixed in the first MAP phase: ``σ_k = 0.01 ρ`` for every harmonic."""
-    return {"sigma": np.full(spec.n_h + 1, HELD_SCATTER_FRACTION * spec.orbit_scale)}

@@ -1,17 +1,4 @@
-"""MAP: minimise the negative log joint with optax Adam, then L-BFGS.
-
-Optionally some sites are first *held* at given values (NumPyro's
-``condition`` handler) for an Adam phase, and then released. The hybrid model
-can use this for its scatter σ (``FitSettings(hold_scatter=True)``): with σ
-free from the start, the optimiser can explain the part of the orbits that the
-map does not yet fit by a larger σ, after which the gradient on the network's
-weights is too weak to learn it. On the wind-tunnel recordings all four
-starts (four random initial network weights) then end at the same point, so the
-network adds nothing there, with a first-harmonic scatter σ_1 of 0.12 (a
-seventh of the orbit size); with σ held at
-1% of the orbit size for the first Adam phase, the negative log joint fell from
-−159 to between −228 and −271, and σ_1 to 0.004–0.016.
-"""
+"""MAP: minimise the negative log joint with optax Adam, then L-BFGS."""
 
 from __future__ import annotations
 
@@ -21,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from numpyro.handlers import Messenger, condition
+from numpyro.handlers import Messenger
 from numpyro.infer.initialization import init_to_value
 from numpyro.infer.util import initialize_model
 
@@ -56,7 +43,6 @@ def fit_map(
     gtol: float = 1e-6,
     progress: bool = True,
     regularised: bool = True,
-    hold: dict | None = None,
 ) -> MapResult:
     """Maximum a posteriori estimate of a NumPyro model.
 
@@ -79,34 +65,10 @@ def fit_map(
         progress: Show progress bars.
         regularised: ``False`` drops the priors (:class:`likelihood_only`):
             maximum likelihood instead of MAP.
-        hold: Constrained values of sites to hold fixed for a first phase of
-            ``adam_steps`` Adam iterations; they are then released, starting
-            from these values, for ``adam_steps // 2`` Adam iterations and the
-            L-BFGS iterations (see the module docstring). ``None``: no such phase.
 
     Returns:
         A :class:`MapResult`.
     """
-    if hold:
-        held = {k: jnp.asarray(v) for k, v in hold.items()}
-        first = fit_map(
-            condition(model, data=held), model_kwargs,
-            {k: v for k, v in init_values.items() if k not in held}, key=key,
-            adam_steps=adam_steps, lbfgs_steps=0, learning_rate=learning_rate, gtol=gtol,
-            progress=progress, regularised=regularised,
-        )
-        start = {k: first.params[k] for k in first.unconstrained}  # the free sample sites
-        second = fit_map(
-            model, model_kwargs, {**start, **held}, key=key, adam_steps=adam_steps // 2,
-            lbfgs_steps=lbfgs_steps, learning_rate=learning_rate, gtol=gtol, progress=progress,
-            regularised=regularised,
-        )
-        return MapResult(
-            params=second.params, unconstrained=second.unconstrained,
-            losses=np.concatenate([first.losses, second.losses]),
-            n_adam=adam_steps + second.n_adam, converged=second.converged,
-            grad_norm=second.grad_norm,
-        )
     if not regularised:
         model = likelihood_only(model)
     info = initialize_model(

@@ -54,6 +54,20 @@ the centre shift).
 and ``β_c | y, θ ~ N(V^{1/2} A^{-1} b, V^{1/2} A^{-1} V^{1/2})``. The
 posterior of the few nonlinear parameters ``θ`` (the normal form's gaps, ``τ_μ``,
 ``τ_s``, ``σ``) is sampled; ``β`` is drawn exactly given each draw of ``θ``.
+
+**Frequency** (the phase equation ``θ̇ = Ω``). By the rotational symmetry of the
+normal form the phase speed depends on ``r`` and ``μ`` only, so each recording's
+frequency is one number, ``ω_i = Ω(r_i, μ_i)``. ``Ω`` is a polynomial in
+``r̃² = (r/r_ref)²`` and ``μ̃`` (:data:`FREQUENCY_TERMS`) about the mean measured
+frequency ``ω̄``,
+
+.. math::  ω_i = ω̄ + χ(r̃_i^2, μ̃_i)^T γ + ε_i,\qquad
+           γ_j \sim N(0, (s_ω ω̄)^2),\quad ε_i \sim N(0, se_{ω,i}^2 + σ_ω^2),
+
+with ``σ_ω ~ HalfNormal(0.01 ω̄)``: linear in ``γ``, so ``γ`` is integrated out by
+the same Woodbury marginal and drawn exactly per draw, and only ``σ_ω`` joins
+the sampled parameters. The record is then the map applied to the circle
+traversed at ``Ω(r_i, μ_i)``: no phase integration is needed.
 """
 
 from __future__ import annotations
@@ -81,6 +95,14 @@ TAU_SHAPE_PRIOR = (0.1, 1.0)
 SIGMA_PRIOR = 0.02
 #: Half-normal scale of the relative model error σ_rel (a fraction of each coefficient).
 SIGMA_REL_PRIOR = 0.02
+#: Prior sd of each frequency coefficient ``γ_j`` as a fraction of ``ω̄`` (broad: a
+#: 10% change of the frequency per unit of ``r̃²`` or of ``μ̃``).
+FREQUENCY_SCALE = 0.1
+#: Half-normal scale of the frequency's model error ``σ_ω`` as a fraction of ``ω̄``.
+SIGMA_OMEGA_PRIOR = 0.01
+#: Terms ``(r̃²)^i μ̃^j`` of the phase speed ``Ω(r, μ) − ω̄``, as ``(i, j)``: the
+#: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
+FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
 #: Phases per orbit for the projection P (aliasing-free for K ≤ 8 with degree-3 terms).
 N_PHI = 32
 
@@ -104,6 +126,8 @@ class CollapsedSpec:
         mu_units: Unit of μ.
         unfolding: ``"linear"`` (the paper's ``μ − μ0``) or ``"curved"``
             (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior).
+        omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
+            ``None`` for a model without the frequency.
     """
 
     criticality: str
@@ -118,6 +142,7 @@ class CollapsedSpec:
     mu_label: str = "mu"
     mu_units: str = ""
     unfolding: str = "curved"
+    omega_centre: float | None = None
 
     def mu_tilde(self, mu):
         """``μ̃ = (μ − μ_c)/Δμ``."""
@@ -251,6 +276,28 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI):
     return jnp.einsum("kn,inj->ikj", projection(spec.n_harmonics, n_phi), psi)
 
 
+def frequency_basis(r2, mu_tilde):
+    """``χ(r̃², μ̃)``: the terms :data:`FREQUENCY_TERMS`, shape ``broadcast + (4,)``."""
+    r2, m = jnp.broadcast_arrays(r2, mu_tilde)
+    return jnp.stack([r2**i * m**j for i, j in FREQUENCY_TERMS], axis=-1)
+
+
+def radius_tilde_squared(spec: CollapsedSpec, mu, sign, theta: dict):
+    """``r̃² = (r / r_ref)²`` of the LCO at μ (``nan`` where the branch does not exist)."""
+    return (radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))) ** 2
+
+
+def frequency_prior_sd(spec: CollapsedSpec):
+    """Prior sds of ``γ``: :data:`FREQUENCY_SCALE` ``· ω̄`` each."""
+    return jnp.full(len(FREQUENCY_TERMS), FREQUENCY_SCALE * spec.omega_centre)
+
+
+def frequency(spec: CollapsedSpec, theta: dict, gamma, mu, sign):
+    """``Ω(r(μ), μ) = ω̄ + χ(r̃², μ̃)ᵀγ`` (rad/s), broadcast over μ; ``nan`` where no LCO."""
+    r2 = radius_tilde_squared(spec, mu, sign, theta)
+    return spec.omega_centre + jnp.sum(frequency_basis(r2, spec.mu_tilde(mu)) * gamma, axis=-1)
+
+
 def _whitened(Phi, y, d, sd):
     """``(A, b, yᵀD⁻¹y, log|D|)`` of the collapsed Gaussian (module docstring)."""
     Phi_s = Phi * sd                               # Φ' = Φ V^{1/2}
@@ -334,7 +381,8 @@ def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
     return coeffs_se**2 + sigma[:, None] ** 2 + (sigma_rel * coeffs) ** 2
 
 
-def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se):
+def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None,
+                    omega_se=None):
     """NumPyro model of the nonlinear parameters, the map integrated out.
 
     Args:
@@ -343,6 +391,9 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se):
         sign: Branch sign (+1 stable, −1 unstable), ``(n_rec,)``.
         coeffs: Measured aligned coefficients, ``(n_rec, 2, 2K+1)``.
         coeffs_se: Their standard errors, same shape.
+        omega: Measured angular frequencies (rad/s), ``(n_rec,)``; used when
+            ``spec.omega_centre`` is set.
+        omega_se: Their standard errors (0 for a one-segment record).
     """
     theta = normal_form_sites(spec)
     tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
@@ -353,6 +404,12 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se):
         y = coeffs[:, c].reshape(-1)
         d = var[:, c].reshape(-1)
         numpyro.factor(f"marginal_{c}", log_marginal(Phi, y, d, sd))
+    if spec.omega_centre is not None and omega is not None:
+        sigma_omega = numpyro.sample(
+            "sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
+        X = frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
+        numpyro.factor("marginal_omega", log_marginal(
+            X, omega - spec.omega_centre, omega_se**2 + sigma_omega**2, frequency_prior_sd(spec)))
 
 
 def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
@@ -366,6 +423,14 @@ def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key)
         d = var[:, c].reshape(-1)
         betas.append(conditional_draw(Phi, coeffs[:, c].reshape(-1), d, sd, eps[c])[0])
     return jnp.stack(betas, axis=-1)
+
+
+def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, key):
+    """One exact draw of the frequency coefficients ``γ`` (4,) given one draw ``θ``."""
+    X = frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
+    eps = jax.random.normal(key, (len(FREQUENCY_TERMS),))
+    d = omega_se**2 + theta["sigma_omega"] ** 2
+    return conditional_draw(X, omega - spec.omega_centre, d, frequency_prior_sd(spec), eps)[0]
 
 
 def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):

@@ -23,6 +23,7 @@ from bayeshopf.plotting._io import save_figure
 from bayeshopf.plotting.diagram import plot_bifurcation
 from bayeshopf.plotting.phase import plot_phase_portraits
 from bayeshopf.plotting.ppc import coefficient_labels, plot_ppc
+from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
 
 __all__ = [
     "FIGURE_NAMES",
@@ -31,13 +32,17 @@ __all__ = [
     "diagram_grid",
     "plot_all",
     "plot_bifurcation",
+    "plot_frequency",
     "plot_phase_portraits",
     "plot_ppc",
+    "plot_time_series",
     "save_figure",
 ]
 
 #: File names written by :func:`plot_all`, in order.
 FIGURE_NAMES = ("bifurcation.png", "phase_portraits.png", "ppc.png")
+#: ... then these for a fit with a frequency model (``fit.has_frequency``).
+FREQUENCY_FIGURE_NAMES = ("frequency.png", "time_series.png")
 
 
 def diagram_grid(fit, n: int = 100, n_refine: int = 25) -> np.ndarray:
@@ -92,7 +97,10 @@ def plot_all(
 
     Writes ``bifurcation.png`` (:func:`plot_bifurcation` with the training
     amplitudes), ``phase_portraits.png`` (:func:`plot_phase_portraits`) and
-    ``ppc.png`` (:func:`plot_ppc`) into ``out_dir``, each atomically.
+    ``ppc.png`` (:func:`plot_ppc`) into ``out_dir``, each atomically; for a fit
+    with a frequency model also ``frequency.png`` (:func:`plot_frequency`, curve
+    and predictive bands with the measured frequencies) and ``time_series.png``
+    (:func:`plot_time_series`, z1 over four periods of each recording).
 
     Args:
         fit: A :class:`~bayeshopf.pipeline.HopfFit`.
@@ -106,7 +114,8 @@ def plot_all(
         dpi: Resolution of the PNG files.
 
     Returns:
-        The paths written, in the order of :data:`FIGURE_NAMES`.
+        The paths written, in the order of :data:`FIGURE_NAMES` (then
+        :data:`FREQUENCY_FIGURE_NAMES`).
     """
     out = Path(out_dir)
     z1 = fit.spec.frame.names[0]
@@ -126,5 +135,22 @@ def plot_all(
                              orbits=getattr(fit, "orbits", None)),
         plot_ppc(ppc, amplitude_units=fit.amplitude_units, amplitude_label=amp_label),
     ]
+    names = list(FIGURE_NAMES)
+    if getattr(fit, "has_frequency", False):
+        bands, pred = [], []
+        branches = ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
+        for b in branches:
+            bands.append(fit.frequency_band(mu, b))
+            pred.append(fit.frequency_band(mu, b, predictive=True))
+        f = fit.features
+        measured = [(m, hz, "unstable" if u else "stable")
+                    for m, hz, u in zip(f.mu, f.frequency_hz, f.unstable, strict=True)]
+        figures += [
+            plot_frequency(bands, measured, predictive=pred, mu_label=fit.mu_label,
+                           mu_units=fit.mu_units),
+            plot_time_series(fit.time_series_bands(recordings), mu_label=fit.mu_label,
+                             mu_units=fit.mu_units),
+        ]
+        names += FREQUENCY_FIGURE_NAMES
     return [save_figure(fig, out / name, dpi=dpi)
-            for fig, name in zip(figures, FIGURE_NAMES, strict=True)]
+            for fig, name in zip(figures, names, strict=True)]

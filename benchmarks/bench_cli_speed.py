@@ -1,0 +1,53 @@
+"""Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
+
+Run: ``python benchmarks/bench_cli_speed.py [--repeat N]`` on an otherwise idle
+machine. Each run is a fresh process; "cold" uses an empty compilation cache
+(``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
+cache the cold run filled. Prints a Markdown table and writes
+``benchmarks/cli_speed.json`` with the stage timings from each ``summary.json``
+and the machine's CPU count and load before each run.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).parent
+RIG = HERE.parent.parent / "shared/data/flutter_cbc"
+EXE = str(Path(sys.executable).with_name("bayeshopf"))
+
+
+def timed(args, cache):
+    out = Path(tempfile.mkdtemp()) / "fit"
+    env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
+    load = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    subprocess.run([EXE, *args, "--out", str(out), "--quiet"], env=env, check=True,
+                   stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    summary = json.loads((out / "summary.json").read_text())
+    return {"command": " ".join(["bayeshopf", *args]), "wall_s": wall, "load_before": load,
+            "stages_s": summary.get("timings_s", {})}
+
+
+def main(repeat=1):
+    rows = []
+    for _ in range(repeat):
+        cache = Path(tempfile.mkdtemp())
+        rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache)})
+        rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache)})
+        rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()))})
+    (HERE / "cli_speed.json").write_text(json.dumps(
+        {"cpu_count": os.cpu_count(), "runs": rows}, indent=1))
+    print("| case | wall (s) | load before | stages (s) |\n|---|---:|---:|---|")
+    for r in rows:
+        st = ", ".join(f"{k} {v:.1f}" for k, v in r["stages_s"].items())
+        print(f"| {r['case']} | {r['wall_s']:.1f} | {r['load_before']:.1f} | {st} |")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1)
