@@ -54,10 +54,10 @@ def single_thread_eigen() -> bool:
     """Add :data:`SINGLE_THREAD_EIGEN` to ``XLA_FLAGS`` unless the user set that flag.
 
     With XLA's multithreaded Eigen pool, jaxlib 0.10 on CPU now and then stalls
-    for minutes (or hangs) compiling or running the NUTS programs: on the rig the
-    same 4-chain NUTS stage took 13 s in one process and 270–410 s in others, and
-    one run waited with every thread idle (PyAutoFit's issue #1528 describes the
-    same stall and the same cure). The models here are small, so one thread per
+    compiling the NUTS programs: one rig fit sat for minutes in
+    ``CompileAndLoad`` with every thread idle (PyAutoFit's issue #1528 describes
+    the same stall and the same cure); with the flag three runs in a row took
+    5–8 s each. The models here are small, so one thread per
     computation costs nothing measurable. Takes effect only before JAX's first
     computation in the process (the CLI and the test suite call it first).
 
