@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import sys
 import time
-import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -194,12 +193,7 @@ class HybridPosterior:
         ``nan`` where fewer than half the draws have the branch.
         """
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        x = self.frequency(mu, branch, predictive)
-        ok = np.isfinite(x).mean(axis=0) >= 0.5
-        with warnings.catch_warnings():      # all-nan columns: no draw has the branch there
-            warnings.simplefilter("ignore", RuntimeWarning)
-            q = np.where(ok, np.nanquantile(x, [0.5, 0.05, 0.95], axis=0), np.nan)
-        return FrequencyBand(branch, mu, q[0], q[1], q[2])
+        return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive))
 
     def time_series(self, mu: float, branch: str, t, phase0: float = 0.0,
                     n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
@@ -231,10 +225,10 @@ class HybridPosterior:
             z = r.planar(recordings.planar)
             t = r.t - r.t[0]
             om = float(f.omega[i])
-            stride = max(1, int(round(2 * np.pi / (om * 60 * r.dt))))
-            sel = np.flatnonzero(t <= n_periods * 2 * np.pi / om)[::stride]
-            w = self.spec.frame.to_frame(z[t <= n_periods * 2 * np.pi / om])
-            ab = np.linalg.lstsq(time_design(t[: w.shape[0]], om, 1), w[:, 0], rcond=None)[0]
+            window = t <= n_periods * 2 * np.pi / om
+            sel = np.flatnonzero(window)[:: max(1, int(round(2 * np.pi / (om * 60 * r.dt))))]
+            w = self.spec.frame.to_frame(z[window])
+            ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
             phase0 = -float(np.arctan2(ab[2], ab[1]))
             pred = self.time_series(r.mu, r.branch, t[sel], phase0)[..., channel]
             q = np.nanquantile(pred, [0.5, 0.05, 0.95], axis=0)
@@ -411,14 +405,15 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     """Frequency (Hz) draws ``(n, n_mu)`` at μ for draws ``(θ, γ)``; ``nan`` where no LCO.
 
     With ``predictive``, each draw gets a new recording's error
-    ``N(0, σ_ω² + omega_se²)`` (rad/s).
+    ``N(0, σ_ω² + omega_se²)`` (rad/s): one standard-normal number per draw for
+    every μ, so that a band over μ is smooth while each μ's marginal is exact.
     """
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
     th = {k: np.asarray(v)[:, None] for k, v in theta.items() if np.ndim(v) == 1}
     om = np.asarray(cm.frequency(spec, th, np.asarray(gammas)[:, None, :], mu, float(sign)))
     if predictive:
         sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
-        om = om + sd * np.random.default_rng(seed).standard_normal(om.shape)
+        om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))
     return om / (2 * np.pi)
 
 

@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -344,6 +345,19 @@ class FrequencyBand:
     lo: np.ndarray
     hi: np.ndarray
 
+    @classmethod
+    def from_draws(cls, branch: str, mu, draws) -> FrequencyBand:
+        """Median and 90% band of frequency draws ``(n, n_mu)`` (``nan``: no LCO in a draw).
+
+        ``nan`` where fewer than half the draws have the branch.
+        """
+        draws = np.asarray(draws, dtype=float)
+        ok = np.isfinite(draws).mean(axis=0) >= 0.5
+        with warnings.catch_warnings():      # all-nan columns: no draw has the branch there
+            warnings.simplefilter("ignore", RuntimeWarning)
+            q = np.where(ok, np.nanquantile(draws, [0.5, 0.05, 0.95], axis=0), np.nan)
+        return cls(branch, np.asarray(mu, dtype=float), q[0], q[1], q[2])
+
 
 @dataclass(frozen=True)
 class SpeedFit:
@@ -499,12 +513,7 @@ class SpeedFit:
                        predictive: bool = False) -> FrequencyBand:
         """Frequency median and 90% band on a μ grid (draws without an LCO are dropped)."""
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        x = self.frequency(mu, branch, predictive)
-        ok = np.isfinite(x).mean(axis=0) >= 0.5
-        with np.errstate(all="ignore"):
-            q = np.where(ok, np.nanquantile(np.where(np.isfinite(x), x, np.nan),
-                                            [0.5, 0.05, 0.95], axis=0), np.nan)
-        return FrequencyBand(branch, mu, q[0], q[1], q[2])
+        return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive))
 
     def map_point_time_series(self, i: int, t=None) -> np.ndarray:
         """Trajectory of training recording ``i`` at the MAP of both stages, frame units."""

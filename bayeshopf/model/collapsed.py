@@ -287,6 +287,11 @@ def radius_tilde_squared(spec: CollapsedSpec, mu, sign, theta: dict):
     return (radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))) ** 2
 
 
+def frequency_design(spec: CollapsedSpec, mu, sign, theta: dict):
+    """``X_i = χ(r̃_i², μ̃_i)`` for every recording, shape ``(n_rec, 4)``."""
+    return frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
+
+
 def frequency_prior_sd(spec: CollapsedSpec):
     """Prior sds of ``γ``: :data:`FREQUENCY_SCALE` ``· ω̄`` each."""
     return jnp.full(len(FREQUENCY_TERMS), FREQUENCY_SCALE * spec.omega_centre)
@@ -407,9 +412,9 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
     if spec.omega_centre is not None and omega is not None:
         sigma_omega = numpyro.sample(
             "sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
-        X = frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
         numpyro.factor("marginal_omega", log_marginal(
-            X, omega - spec.omega_centre, omega_se**2 + sigma_omega**2, frequency_prior_sd(spec)))
+            frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
+            omega_se**2 + sigma_omega**2, frequency_prior_sd(spec)))
 
 
 def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
@@ -427,10 +432,10 @@ def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key)
 
 def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, key):
     """One exact draw of the frequency coefficients ``γ`` (4,) given one draw ``θ``."""
-    X = frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
     eps = jax.random.normal(key, (len(FREQUENCY_TERMS),))
     d = omega_se**2 + theta["sigma_omega"] ** 2
-    return conditional_draw(X, omega - spec.omega_centre, d, frequency_prior_sd(spec), eps)[0]
+    return conditional_draw(frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
+                            d, frequency_prior_sd(spec), eps)[0]
 
 
 def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):
