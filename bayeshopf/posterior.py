@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
+from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand
 from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, _quantiles
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import Interval, interval
@@ -29,12 +30,12 @@ from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import (
     HarmonicFeatures,
     extract_harmonics,
+    phase_design,
     reconstruct,
     time_design,
 )
 from bayeshopf.inference import collapsed as ci
-from bayeshopf.inference.cache import enable_compilation_cache
-from bayeshopf.inference.speed import FrequencyBand, TimeSeriesBand
+from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
@@ -156,9 +157,22 @@ class HybridPosterior:
         """
         c = self.orbit_coefficients(mu, branch)
         if predictive:
+            c = self._away_from_data(c, mu, branch)
             rng = np.random.default_rng(self.seed)
             c = c + self._noise_sd(c, coeffs_se) * rng.standard_normal(c.shape)
         return self._amplitude_of(c)
+
+    def _away_from_data(self, coeffs, mu, branch: str) -> np.ndarray:
+        """Predicted orbits with the model error away from the recordings (when enabled).
+
+        :func:`extrapolation_factor` from this branch's training μ; zero at them.
+        """
+        if not self.settings.extrapolation:
+            return coeffs
+        f = self.features
+        mu_data = f.mu[f.unstable == (branch == "unstable")]
+        return scale_orbits(coeffs, extrapolation_factor(mu, mu_data, self.spec.mu_span,
+                                                         np.shape(coeffs)[0], self.seed))
 
     # ----------------------------------------------------------------- frequency
     @property
@@ -266,7 +280,8 @@ class HybridPosterior:
         c = self.orbit_coefficients(mu, branch)
         amp = self._amplitude_of(c)
         rng = np.random.default_rng(self.seed)
-        amp_p = self._amplitude_of(c + self._noise_sd(c) * rng.standard_normal(c.shape))
+        ce = self._away_from_data(c, mu, branch)
+        amp_p = self._amplitude_of(ce + self._noise_sd(ce) * rng.standard_normal(c.shape))
         q, p = _quantiles(amp)
         qp, _ = _quantiles(amp_p)
         return BranchBand(int(_sign(branch)), np.asarray(mu), q, p, qp)
@@ -358,6 +373,14 @@ def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
 _ORBIT_FNS: dict[int, tuple] = {}
 
 
+def clear_orbit_jits() -> None:
+    """Forget the compiled orbit functions of every spec.
+
+    Called by :func:`~bayeshopf.inference.cache.release_compiled`.
+    """
+    _ORBIT_FNS.clear()
+
+
 def _orbit_fn(spec: cm.CollapsedSpec):
     """The jitted ``(θ, β, μ per draw, sign) ↦ coefficients``, compiled once per spec."""
     hit = _ORBIT_FNS.get(id(spec))
@@ -417,6 +440,35 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     return om / (2 * np.pi)
 
 
+def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int) -> np.ndarray:
+    """Draws of ``e^{δ_b(μ)}``, the model error away from the recordings, ``(n, n_mu)``.
+
+    ``δ_b(μ) = s_e z c_b(μ)`` with ``s_e ~ HalfNormal(EXTRAPOLATION_SCALE)`` and
+    ``z ~ N(0, 1)``, one pair per draw for every μ (smooth bands over μ, exact
+    marginals at each μ), and ``c_b`` :func:`~bayeshopf.model.collapsed.extrapolation_sd`
+    with ``ℓ = EXTRAPOLATION_LENGTH · Δμ`` (:mod:`bayeshopf.model.collapsed`).
+
+    Args:
+        mu: Where, ``(n_mu,)``.
+        mu_data: The branch's training μ.
+        mu_span: The recordings' μ span Δμ.
+        n: Draws.
+        seed: Seed (its own stream, apart from the measurement noise's).
+    """
+    rng = np.random.default_rng([seed, 1])
+    s = np.abs(rng.normal(0.0, cm.EXTRAPOLATION_SCALE, n))
+    z = rng.standard_normal(n)
+    c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
+    return np.exp((s * z)[:, None] * c[None])
+
+
+def scale_orbits(coeffs, factor) -> np.ndarray:
+    """Orbits ``(n, n_mu, 2, 2K+1)`` scaled about their centres (``a_0`` kept) by ``(n, n_mu)``."""
+    c = np.array(coeffs, dtype=float, copy=True)
+    c[..., 1:] *= np.asarray(factor)[..., None, None]
+    return c
+
+
 def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
     """``√(se² + σ_c² + (σ_rel c)²)`` for predicted coefficients ``(n, ..., 2, 2K+1)``.
 
@@ -430,9 +482,16 @@ def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
 
 
 def amplitude_of(spec: cm.CollapsedSpec, coeffs) -> np.ndarray:
-    """Peak-to-peak of z1 of the orbits with these frame coefficients (last two axes)."""
+    """Peak-to-peak of z1 of the orbits with these frame coefficients (last two axes).
+
+    ``z1 = c_1 + L_{1·} w`` is linear in the frame coordinates, so its harmonic
+    coefficients are ``L_{1·}`` applied to the frame's (the centre only shifts
+    ``a_0``, which the peak-to-peak ignores); only z1 is reconstructed, at 256 phases.
+    """
     phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
-    z1 = spec.frame.from_frame(reconstruct(coeffs, phi))[..., 0]
+    K = (np.shape(coeffs)[-1] - 1) // 2
+    z1_coeffs = np.asarray(spec.frame.L)[0] @ np.asarray(coeffs)        # (..., 2K+1)
+    z1 = z1_coeffs @ phase_design(phi, K).T                               # (..., 256)
     return z1.max(axis=-1) - z1.min(axis=-1)
 
 
@@ -544,6 +603,7 @@ def fit_hybrid(
     settings = settings or ci.CollapsedSettings()
     if compilation_cache:
         enable_compilation_cache()
+    release_compiled()      # a process fitting many data sets would exhaust vm.max_map_count
     timings = {}
     t0 = time.perf_counter()
     if isinstance(recordings, RecordingSet):

@@ -291,6 +291,7 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
                  "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),
                  "predictive_omega_se": float(np.median(post.features.omega_se)),
+                 "extrapolation": _extrapolation_data(post),
                  "seed": post.seed}
         _write_json(model, stage / MODEL)
         chains = {k: v for k, v in post.run.chains.items() if not k.startswith("marginal")}
@@ -311,6 +312,14 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
     return _staged(out, force, write)
 
 
+def _extrapolation_data(post) -> dict | None:
+    """Training μ per branch for the model error away from the recordings, or None if off."""
+    if not post.settings.extrapolation:
+        return None
+    f = post.features
+    return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist()}
+
+
 @dataclass(frozen=True)
 class SavedHybrid:
     """A collapsed-core fit read back from its folder.
@@ -322,6 +331,9 @@ class SavedHybrid:
         summary: The content of ``summary.json``.
         predictive_se: Standard errors of a new recording's coefficients.
         predictive_omega_se: Standard error of a new recording's frequency (rad/s).
+        extrapolation: Training μ of each branch (``mu_stable``, ``mu_unstable``)
+            for the model error away from the recordings; ``None`` when the fit
+            had it off.
     """
 
     folder: Path
@@ -330,6 +342,7 @@ class SavedHybrid:
     summary: dict
     predictive_se: np.ndarray
     predictive_omega_se: float = 0.0
+    extrapolation: dict | None = None
 
     def frequency(self, mu: float, branch: str = "stable", predictive: bool = False
                   ) -> Interval | None:
@@ -358,6 +371,10 @@ class SavedHybrid:
         theta = {k: v for k, v in s.items() if k not in ("beta", "gamma")}
         c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp._sign(branch))
         if predictive:
+            if self.extrapolation is not None:
+                c = bp.scale_orbits(c, bp.extrapolation_factor(
+                    [mu], self.extrapolation[f"mu_{branch}"], self.spec.mu_span, c.shape[0],
+                    int(self.summary.get("seed", 0))))
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
             sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
             c = c + sd * rng.standard_normal(c.shape)
@@ -450,5 +467,6 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
         raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
     if model.get("core") == COLLAPSED_CORE:
         return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]),
-                           float(model.get("predictive_omega_se", 0.0)))
+                           float(model.get("predictive_omega_se", 0.0)),
+                           model.get("extrapolation"))
     return SavedFit(folder, spec, samples, summary)

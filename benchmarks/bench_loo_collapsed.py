@@ -4,8 +4,10 @@ Run: ``python benchmarks/bench_loo_collapsed.py [linear|curved]``. Features of t
 recordings are taken once, in the full data's frame; each recording is held out
 in turn, the model is refitted on the other six (default settings, seed 0), and
 the held-out amplitude is compared with its 90% posterior predictive band (the
-model's coefficients plus the model error and the held-out recording's own
-standard errors). Writes ``benchmarks/loo_collapsed_<unfolding>.json``.
+model's coefficients, the model error away from the data, the model error and
+the held-out recording's own standard errors), and with the same band without
+the model error away from the data (``CollapsedSettings.extrapolation=False``).
+Writes ``benchmarks/loo_collapsed_<unfolding>.json``.
 """
 
 import json
@@ -17,6 +19,12 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+
+
+def _maps():
+    """Memory mappings of this process (Linux; grows per fit unless compiled code is released)."""
+    p = Path("/proc/self/maps")
+    return len(p.read_text().splitlines()) if p.exists() else None
 
 
 def main(unfolding="curved"):
@@ -35,25 +43,36 @@ def main(unfolding="curved"):
         t0 = time.perf_counter()
         post = fit_hybrid(f.subset(keep), "subcritical", seed=0, settings=settings,
                           progress=False)
+        wall = time.perf_counter() - t0
         branch = "unstable" if f.unstable[i] else "stable"
-        amp = post.amplitude([f.mu[i]], branch, predictive=True, coeffs_se=f.coeffs_se[i])[:, 0]
-        ok = np.isfinite(amp)
-        iv = interval(amp[ok]) if ok.any() else None
+        bands = {}
+        for on in (True, False):     # with and without the model error away from the data
+            p = replace(post, settings=replace(post.settings, extrapolation=on))
+            amp = p.amplitude([f.mu[i]], branch, predictive=True, coeffs_se=f.coeffs_se[i])[:, 0]
+            ok = np.isfinite(amp)
+            bands[on] = (interval(amp[ok]) if ok.any() else None), float(ok.mean())
+        (iv, p_exists), (iv0, _) = bands[True], bands[False]
         rows.append({"name": f.names[i], "mu": float(f.mu[i]), "branch": branch,
                      "measured": float(f.amplitude[i]),
                      "band": None if iv is None else [iv.lo, iv.median, iv.hi],
                      "inside": bool(iv is not None and iv.contains(f.amplitude[i])),
-                     "p_exists": float(ok.mean()), "wall_s": time.perf_counter() - t0,
+                     "band_without_extrapolation": None if iv0 is None
+                     else [iv0.lo, iv0.median, iv0.hi],
+                     "inside_without_extrapolation": bool(iv0 is not None
+                                                          and iv0.contains(f.amplitude[i])),
+                     "p_exists": p_exists, "wall_s": wall, "memory_maps": _maps(),
                      "mu0": post.interval("mu0").to_json(),
                      "mu_fold": post.interval("mu_fold").to_json()})
         r = rows[-1]
         print(f"{r['name']:24s} measured {1e3 * r['measured']:6.2f} mm  band "
               f"{np.round(1e3 * np.array(r['band']), 2).tolist() if r['band'] else None} "
               f"{'inside' if r['inside'] else 'OUTSIDE'}", flush=True)
-    n_in = sum(r["inside"] for r in rows)
-    widths = [r["band"][2] - r["band"][0] for r in rows if r["band"]]
-    print(f"{n_in}/{len(rows)} held-out amplitudes inside their 90% predictive bands; "
-          f"mean band width {1e3 * np.mean(widths):.2f} mm")
+    for key, what in (("", "with the model error away from the data (default)"),
+                      ("_without_extrapolation", "without it")):
+        n_in = sum(r["inside" + key] for r in rows)
+        widths = [r["band" + key][2] - r["band" + key][0] for r in rows if r["band" + key]]
+        print(f"{what}: {n_in}/{len(rows)} held-out amplitudes inside their 90% predictive "
+              f"bands; mean band width {1e3 * np.mean(widths):.2f} mm")
     (HERE / f"loo_collapsed_{unfolding}.json").write_text(json.dumps(rows, indent=1))
 
 

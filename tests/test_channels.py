@@ -39,6 +39,7 @@ def _true_amplitude(truth, mu, branch):
     return float(y.max() - y.min())
 
 
+@pytest.mark.slow  # legacy core fit
 @pytest.mark.parametrize(("mu", "branch"), [(17.0, "stable"), (16.0, "unstable"), (19.0, "stable")])
 def test_channel_amplitude_at_unseen_mu_is_inside_its_band(planted, mu, branch):
     _, truth, result, ch = planted
@@ -49,6 +50,7 @@ def test_channel_amplitude_at_unseen_mu_is_inside_its_band(planted, mu, branch):
     assert hi - lo < 0.05 * true  # informative, not merely wide
 
 
+@pytest.mark.slow  # legacy core fit
 def test_channel_waveform_matches_the_planted_function(planted):
     """Along the predicted orbit the channel's median waveform equals 2h − 0.5α of that orbit."""
     rs, truth, result, ch = planted
@@ -61,6 +63,7 @@ def test_channel_waveform_matches_the_planted_function(planted):
     assert ch.measured_amplitude.shape == (len(rs),)
 
 
+@pytest.mark.slow  # legacy core fit
 def test_bad_channel_requests_say_what_was_expected(planted):
     rs, _, result, _ = planted
     with pytest.raises(FitError, match="planar pair"):

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy.stats import multivariate_normal
 
 from bayeshopf.features.frame import PlanarFrame
@@ -80,3 +81,42 @@ def test_branches_meet_at_the_sampled_fold():
     r = float(cm.radius(spec, 16.0, normal_form.STABLE, theta))
     b = float(cm.unfolding(16.0, mu0, w, mu_fold))
     np.testing.assert_allclose(r**4 - theta["a2"] * r**2 - b, 0.0, atol=1e-12)
+
+
+def test_amplitude_is_the_peak_to_peak_of_z1_in_physical_units():
+    """``amplitude_of`` (z1's coefficients only) against the full orbit mapped point by point."""
+    from types import SimpleNamespace
+
+    from bayeshopf.posterior import amplitude_of
+
+    rng = np.random.default_rng(3)
+    frame = PlanarFrame(np.array([0.6, 0.7]), np.array([[0.02, 0.01], [0.05, 0.3]]))
+    K = 3
+    c = rng.standard_normal((4, 5, 2, 2 * K + 1)) * np.array([1.0, 1, 0.3, 0.1, 0, 0.3, 0.1])
+    phi = np.linspace(0, 2 * np.pi, 20000, endpoint=False)
+    k = np.arange(1, K + 1)
+    w = (c[..., :1] + np.einsum("...k,kp->...p", c[..., 1:K + 1], np.cos(k[:, None] * phi))
+         + np.einsum("...k,kp->...p", c[..., K + 1:], np.sin(k[:, None] * phi)))  # (..., 2, P)
+    z = frame.centre + np.swapaxes(w, -1, -2) @ frame.L.T                          # (..., P, 2)
+    ref = np.ptp(z[..., 0], axis=-1)
+    got = amplitude_of(SimpleNamespace(frame=frame), c)
+    np.testing.assert_allclose(got, ref, rtol=1e-3)     # 256 phases: a crest falls between two
+    c[0, 0, 0, 0] = np.nan
+    assert np.isnan(amplitude_of(SimpleNamespace(frame=frame), c)[0, 0])
+
+
+def test_extrapolation_sd_is_the_gaussian_process_conditional():
+    """Zero at the data, the one-point closed form √(1 − e^{−d²/ℓ²}), 1 far away and with no data."""
+    ell = 0.8
+    d = np.array([0.0, 0.3, 0.8, 2.0])
+    np.testing.assert_allclose(cm.extrapolation_sd(15.0 + d, [15.0], ell),
+                               np.sqrt(1 - np.exp(-(d / ell) ** 2)), atol=2e-5)  # jitter 1e-10
+    data = [14.9, 15.7, 16.5, 16.5]                         # a repeated μ is one point
+    np.testing.assert_allclose(cm.extrapolation_sd(data, data, ell), 0.0, atol=1e-4)
+    far = cm.extrapolation_sd([30.0], data, ell)
+    assert far[0] == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_array_equal(cm.extrapolation_sd([15.0, 16.0], [], ell), [1.0, 1.0])
+    # between two recordings it is below its value beside one: a second neighbour explains more
+    mid = cm.extrapolation_sd([15.3], [14.9, 15.7], ell)[0]
+    one = cm.extrapolation_sd([15.3], [14.9], ell)[0]
+    assert mid < one

@@ -23,6 +23,7 @@ def result(planted):
     return fit(rs, "subcritical", seed=0, settings=FitSettings(n_starts=2), progress=False)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_map_recovers_mu0_a2(result, planted):
     _, truth = planted
     p = result.map.params
@@ -31,6 +32,7 @@ def test_map_recovers_mu0_a2(result, planted):
     assert abs(float(p["mu_fold"]) - truth.mu_fold) < 0.05
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_map_recovers_linear_map(result, planted):
     """T_L in physical units, up to the normal form's phase (a rotation of u).
 
@@ -48,6 +50,7 @@ def test_map_recovers_linear_map(result, planted):
                                rtol=0.1, atol=0.05 * np.sqrt(np.abs(G_true)).max())
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_svi_intervals_cover_planted_values(result, planted):
     _, truth = planted
     for name, value in (("mu0", truth.mu0), ("a2", truth.a2), ("mu_fold", truth.mu_fold)):
@@ -56,12 +59,14 @@ def test_svi_intervals_cover_planted_values(result, planted):
         assert iv.width < 0.1 * abs(value), f"{name}: interval {iv} uninformative"
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_posterior_predictive_covers_training_amplitudes(result):
     ppc = result.ppc()
     assert ppc.covered.all(), list(zip(ppc.measured, ppc.predictive, strict=False))
     assert ppc.coeff_coverage > 0.8
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_curve_band_covers_true_diagram(result, planted):
     _, truth = planted
     d = result.diagram()
@@ -73,6 +78,7 @@ def test_curve_band_covers_true_diagram(result, planted):
     assert d.mu0.contains(truth.mu0) and d.mu_fold.contains(truth.mu_fold)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_reproducible_from_seed(planted):
     """Two fits from one seed give identical draws and losses (short runs: only the equality
     of every random choice is checked here, not convergence)."""
@@ -92,6 +98,7 @@ def test_supercritical_refuses_unstable_recordings(planted):
         fit(rs, "supercritical", settings=FitSettings.fast(), progress=False)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_every_start_is_recorded_and_stacked(result):
     """Default fits run several MAP starts; the posterior is their stacked mixture."""
     starts = result.starts
@@ -105,6 +112,7 @@ def test_every_start_is_recorded_and_stacked(result):
         assert np.isfinite(s.lpd) and set(s.map_values) == {"mu0", "a2", "mu_fold"}
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_supercritical_gauge_fits_a_planted_quintic_system():
     """Data from the quintic gauge (a2 = −3.4, a4 = −1) fitted in the gauge a2 = −1, a4 = −κ.
 
@@ -135,6 +143,7 @@ def check(result):
     return nuts_check(result, num_chains=2, num_warmup=100, num_samples=100, seed=0)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_chains_hold_the_planted_normal_form(check, planted):
     """Each chain's 90% intervals of μ0, a2 and the fold hold the planted values."""
     _, truth = planted
@@ -143,6 +152,7 @@ def test_chains_hold_the_planted_normal_form(check, planted):
             assert iv.lo - 0.02 <= value <= iv.hi + 0.02, f"chain {c} {name}: {iv} vs {value}"
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_chains_agree_with_svi_where_the_data_identify_the_model(check, result):
     """On well-identified data the chains' μ0 lies inside SVI's band and vice versa."""
     svi = result.interval("mu0")
@@ -153,6 +163,7 @@ def test_chains_agree_with_svi_where_the_data_identify_the_model(check, result):
     assert hi - lo < svi.width, (lo, hi, svi)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_report_has_rhat_per_latent_site_and_draws_per_chain(check):
     assert {"gap_fold", "gap_hopf", "sigma", "nn_scale", "nn_W0"} <= set(check.rhat)
     assert "mu0" not in check.rhat  # deterministic, not sampled
@@ -162,11 +173,13 @@ def test_report_has_rhat_per_latent_site_and_draws_per_chain(check):
     assert np.isfinite(check.max_rhat)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_one_chain_is_refused(result):
     with pytest.raises(ValueError, match="at least 2"):
         nuts_check(result, num_chains=1)
 
 
+@pytest.mark.slow  # legacy core (--core legacy)
 def test_held_out_log_likelihood_of_a_training_recording_is_the_fits_own(result):
     """The held-out density (prediction recomputed at μ_i) against the model's own coeffs_hat."""
     from bayeshopf.diagnostics.comparison import held_out_log_likelihood, pointwise_log_likelihood

@@ -93,3 +93,26 @@ def test_predicted_time_series_follows_the_recording(planted):
         assert err < 0.05, (b.name, err)
         # the curve band (no measurement noise) is narrow against the oscillation
         assert np.max(b.hi - b.lo) < 0.1 * scale, b.name
+
+
+def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_path):
+    """The model error away from the data: nil at a training μ, wide beyond the last recording,
+    and the same band from the saved fit (``bayeshopf predict --predictive``)."""
+    from bayeshopf import report
+
+    post, _, _ = planted
+    off = replace(post, settings=replace(post.settings, extrapolation=False))
+    f = post.features
+    i = int(np.argmax(np.where(f.unstable, -np.inf, f.mu)))   # the stable recording of largest μ
+    q = [0.05, 0.5, 0.95]
+    at = np.quantile(post.amplitude([f.mu[i]], "stable", predictive=True)[:, 0], q)
+    np.testing.assert_allclose(at, np.quantile(off.amplitude([f.mu[i]], "stable",
+                                                             predictive=True)[:, 0], q), rtol=1e-4)
+    beyond = [f.mu[i] + 0.5 * post.spec.mu_span]
+    on_b = np.quantile(post.amplitude(beyond, "stable", predictive=True)[:, 0], q)
+    off_b = np.quantile(off.amplitude(beyond, "stable", predictive=True)[:, 0], q)
+    assert on_b[2] - on_b[0] > 3 * (off_b[2] - off_b[0]), (on_b, off_b)
+    assert on_b[1] == pytest.approx(off_b[1], rel=0.02)          # wider, not shifted
+    report.save_hybrid(post, tmp_path / "fit")
+    saved = report.load_fit(tmp_path / "fit").predict(beyond[0], "stable", predictive=True)
+    np.testing.assert_allclose([saved.lo, saved.median, saved.hi], on_b, rtol=1e-9)

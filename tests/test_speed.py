@@ -141,6 +141,7 @@ def synthetic():
     "fold, the curve band [2.6021, 2.6059] Hz misses the planted 2.6068 by 0.035%; the measured "
     "mean frequency there is 2.6068 ± 0.0014, and the time-series likelihood pulls the curve "
     "0.11% below it through the map's orbit-shape error, which L2 changed"))
+@pytest.mark.slow  # legacy speed stage (--core legacy --speed)
 def test_planted_frequency_inside_band(synthetic):
     """The 90% frequency band covers the planted ω(r(μ))/2π at training and held-out μ.
 
@@ -174,6 +175,7 @@ def test_planted_frequency_inside_band(synthetic):
     assert max(rel) < 3e-3, rel
 
 
+@pytest.mark.slow  # legacy speed stage (--core legacy --speed)
 def test_training_frequencies_inside_predictive_band(synthetic):
     """Every training recording's measured frequency lies in its 90% predictive band (curve + τ)."""
     rs, _, sf, _ = synthetic
@@ -186,6 +188,7 @@ def test_training_frequencies_inside_predictive_band(synthetic):
         assert pv.contains(abs(sf.data.measured_hz[i])), (r.name, pv, sf.data.measured_hz[i])
 
 
+@pytest.mark.slow  # legacy speed stage (--core legacy --speed)
 def test_time_series_shapes_and_units(synthetic):
     rs, _, sf, _ = synthetic
     r = rs[0]
@@ -199,6 +202,7 @@ def test_time_series_shapes_and_units(synthetic):
         sf.time_series(r.mu, r.branch, r.t[:5])
 
 
+@pytest.mark.slow  # legacy speed stage (--core legacy --speed)
 def test_predict_cli_reports_frequency(synthetic, tmp_path, capsys):
     """`bayeshopf predict --json` adds the frequency band when the fit folder has speed.npz."""
     import json
@@ -295,6 +299,7 @@ def test_flutter3dof_frequencies_against_the_continuation():
     assert np.all(err < 1.0), err
 
 
+@pytest.mark.slow  # legacy speed stage (--core legacy --speed)
 def test_plots_draw(synthetic, tmp_path):
     """Fig. ts_exp with bands and frequency against μ are drawn from the fit's records."""
     from bayeshopf.plotting import save_figure

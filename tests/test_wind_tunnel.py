@@ -1,52 +1,84 @@
-"""The real wind-tunnel CBC recordings (../shared/data/flutter_cbc), fitted at default settings."""
+"""The real wind-tunnel CBC recordings (../shared/data/flutter_cbc), fitted as `bayeshopf fit` is.
+
+One fit of the collapsed core at its default settings (seed 0): the call a user
+makes. The bars are issue 19's: every amplitude and frequency inside its 90%
+predictive band, every orbit within 5% (or twice its segment spread), and NUTS
+converged. The legacy core's rig fit (``fit_auto``) is checked in the slow
+``test_wind_tunnel_validation``.
+"""
 
 from __future__ import annotations
 
 import pytest
 
 from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
-from bayeshopf.pipeline import FitSettings
+
+#: The recording the core does not fit to the bar (README, Limits).
+UNFITTED = "CBC_unstable_v16_5.mat"
 
 
 @pytest.fixture(scope="module")
-def result(cbc_auto):
-    """``fit(rs, "subcritical", seed=0)`` at default settings: the subcritical fit that
-    ``fit_auto`` made and preferred (conftest's ``cbc_auto``, shared with
-    test_wind_tunnel_validation)."""
-    res, evidence = cbc_auto
-    assert res.criticality == "subcritical", evidence["statement"]
-    assert res.settings == FitSettings() and res.seed == 0
-    return res
+def post(cbc_recordings):
+    from bayeshopf.posterior import fit_hybrid
+
+    return fit_hybrid(cbc_recordings, "subcritical", seed=0, progress=False)
 
 
-def test_subcritical_diagram_contains_all_seven_amplitudes(result):
-    ppc = result.ppc()
+def test_all_seven_amplitudes_and_frequencies_inside_their_bands(post):
+    ppc = post.ppc()
     assert ppc.measured.size == 7
     assert ppc.covered.all(), [(a, iv) for a, iv in zip(ppc.measured, ppc.predictive, strict=True)]
+    freq = post.diagnostics["fit"]["frequency"]
+    assert len(freq) == 7 and all(e["inside_ci90"] for e in freq), freq
 
 
-def test_hopf_and_fold_near_the_papers_estimates(result):
-    """The paper reports μ0 = 17.67 m/s and a fold at 14.66 m/s (MAP-like point estimates)."""
-    mu0, fold = result.interval("mu0"), result.interval("mu_fold")
-    assert mu0.contains(17.67), mu0
-    assert fold.contains(14.66), fold
-    # every unstable recording lies between the fold and the Hopf point
-    assert fold.hi <= 14.9 + 1e-9 and mu0.lo >= 16.5
-
-
-def test_map_free_pair_invariant_agrees_with_the_fit(result):
-    """Three stable/unstable pairs give μ0, a2 and the fold without any map; they agree.
-
-    And two pairs predict the third: the unstable 16.5 m/s orbit (19.5 mm) from
-    the pairs at 14.9 and 15.7 m/s comes out too large, as in the hybrid
-    model's leave-one-out fold (README, "Why the unstable 16.5 m/s orbit").
-    """
-    pairs = pair_invariants(result.features)
-    assert [round(p.mu, 1) for p in pairs] == [14.9, 15.7, 16.5]
-    line = invariant_line(pairs)
+def test_nuts_converged_on_the_rig(post):
+    d = post.diagnostics["posterior"]
+    assert d["method"] == "nuts" and d["chains"] == 4
     for name in ("mu0", "a2", "mu_fold"):
-        free, fitted = line.interval(name), result.interval(name)
-        assert free.lo <= fitted.hi and fitted.lo <= free.hi, (name, free, fitted)
+        site = d["sites"][name]
+        assert site["r_hat"] <= 1.01 and site["ess_bulk"] >= 400, (name, site)
+
+
+def test_orbits_fitted_except_the_last_unstable_one(post):
+    """Six of the seven posterior-median orbits meet the bar; UNFITTED is the strict xfail below."""
+    errs = {e["name"]: e for e in post.diagnostics["fit"]["orbit_error"]}
+    assert len(errs) == 7
+    for name, e in errs.items():
+        if name != UNFITTED:
+            assert e["ok"], e
+            assert e["relative"] < 0.05 or e["relative"] < 2 * e["spread"], e
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 19: the unstable 16.5 m/s orbit, the smallest (19.5 mm) and next to the Hopf point, is "
+    "missed by 7.8% of its size against a 2.7% segment spread (seed 0); the map that would fit it "
+    "lets the Hopf point slide (docs/inference_core.md, README Limits)"))
+def test_the_unstable_orbit_next_to_the_hopf_point_is_fitted(post):
+    e = next(e for e in post.diagnostics["fit"]["orbit_error"] if e["name"] == UNFITTED)
+    assert e["ok"], e
+
+
+def test_unstable_recordings_lie_between_the_fold_and_the_hopf_point(post):
+    mu0, fold = post.interval("mu0"), post.interval("mu_fold")
+    assert fold.hi <= 14.9 and mu0.lo >= 16.5, (fold, mu0)
+
+
+def test_map_free_pair_invariant_of_the_rig(post):
+    """Three stable/unstable pairs give μ0 without any map, and two pairs mis-predict the third.
+
+    The line through the pairs assumes the paper's linear unfolding; it puts μ0
+    at 17.3–17.5 m/s and predicts the unstable 16.5 m/s orbit from the pairs at
+    14.9 and 15.7 m/s too large (README, "Why the unstable 16.5 m/s orbit"). The
+    fit's curved unfolding bends through all three pairs instead, so its μ0 lies
+    below the line's (README, Limits): asserted here, so that a change of either
+    shows.
+    """
+    pairs = pair_invariants(post.features)
+    assert [round(p.mu, 1) for p in pairs] == [14.9, 15.7, 16.5]
+    line = invariant_line(pairs).interval("mu0")
+    assert 17.2 < line.lo < line.hi < 17.6, line
+    assert post.interval("mu0").hi < line.lo
     held = pairs[2]
     pred = invariant_line(pairs[:2]).unstable_amplitude(held.mu, held.stable_amplitude)
     assert pred.lo > held.unstable_amplitude, (pred, held.unstable_amplitude)

@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mu", type=float, required=True, help="value of the bifurcation parameter")
     p.add_argument("--branch", choices=("stable", "unstable"), default="stable")
     p.add_argument("--predictive", action="store_true",
-                   help="band of a new measurement (adds the scatter σ) instead of the curve")
+                   help="band of a new measurement instead of the curve (adds the model "
+                   "error, which grows away from the recordings, and the measurement error)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
     _simulate.add_parser(sub)

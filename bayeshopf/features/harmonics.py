@@ -88,7 +88,7 @@ def reconstruct(coeffs, phi) -> np.ndarray:
         Shape ``(..., n_phi, n_ch)``.
     """
     K = (np.shape(coeffs)[-1] - 1) // 2
-    return np.einsum("pk,...ck->...pc", phase_design(phi, K), coeffs)
+    return phase_design(phi, K) @ np.swapaxes(np.asarray(coeffs), -1, -2)
 
 
 def _frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:

@@ -81,11 +81,16 @@ def release_compiled() -> None:
     limit on memory mappings (``vm.max_map_count``, 65530 by default): LLVM
     fails with "Cannot allocate memory" (the 3-DOF calibration crashed at its
     14th fit of 4 starts, with 23 GB of memory free).
-    :func:`~bayeshopf.pipeline.fit` calls this first; nothing compiled for an
-    earlier fit is reused by a later one, and the persistent cache on disk is
-    kept, so a repeated fit still loads its programs instead of compiling.
+    The collapsed core leaks the same way (its short-record calibration
+    crashed at its 16th fit, after about 4,400 new mappings per fit).
+    :func:`~bayeshopf.posterior.fit_hybrid` and :func:`~bayeshopf.pipeline.fit`
+    call this first; nothing compiled for an earlier fit is reused by a later
+    one, and the persistent cache on disk is kept, so a repeated fit still loads
+    its programs instead of compiling.
     """
+    from bayeshopf import posterior
     from bayeshopf.model import hybrid
 
     hybrid.clear_spec_jits()
+    posterior.clear_orbit_jits()
     jax.clear_caches()

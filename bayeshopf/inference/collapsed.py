@@ -71,6 +71,9 @@ class CollapsedSettings:
         n_svi_draws: Draws of the SVI posterior.
         lbfgs_steps: Most L-BFGS steps of the MAP.
         frequency: Whether the model includes the frequency ``Ω(r, μ)``.
+        extrapolation: Whether a new measurement's band includes the model error
+            away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
+            zero at the training recordings, so the fit and its checks do not change).
     """
 
     n_harmonics: int = 4
@@ -86,6 +89,7 @@ class CollapsedSettings:
     n_svi_draws: int = 2000
     lbfgs_steps: int = 300
     frequency: bool = True
+    extrapolation: bool = True
 
     @classmethod
     def fast(cls) -> CollapsedSettings:

@@ -68,6 +68,23 @@ with ``σ_ω ~ HalfNormal(0.01 ω̄)``: linear in ``γ``, so ``γ`` is integrate
 the same Woodbury marginal and drawn exactly per draw, and only ``σ_ω`` joins
 the sampled parameters. The record is then the map applied to the circle
 traversed at ``Ω(r_i, μ_i)``: no phase integration is needed.
+
+**Model error away from the recordings** (predictions only). A new recording at
+μ on branch ``b`` has its orbit about its centre scaled by ``e^{δ_b(μ)}``, with
+``δ_b`` a squared-exponential Gaussian process in μ conditioned on ``δ_b = 0``
+at that branch's training recordings (the fit there is what the likelihood
+says it is):
+
+.. math::  δ_b(μ) \sim N\big(0, s_e^2\,c_b(μ)^2\big),\quad
+           c_b(μ)^2 = 1 - k_*^T K^{-1} k_*,\quad
+           k(μ, μ') = e^{-(μ-μ')^2 / 2ℓ^2},
+
+``s_e ~ HalfNormal(`` :data:`EXTRAPOLATION_SCALE` ``)``, ``ℓ =``
+:data:`EXTRAPOLATION_LENGTH` ``· Δμ`` (both fixed before any rig run, for the
+radius discrepancy tried in the likelihood; ``docs/inference_core.md``). It is
+zero at every training recording, so it changes neither the posterior nor the
+training checks; it widens the band of a new measurement between and beyond
+the recordings, where the normal form's fit is an inter- or extrapolation.
 """
 
 from __future__ import annotations
@@ -103,6 +120,10 @@ SIGMA_OMEGA_PRIOR = 0.01
 #: Terms ``(r̃²)^i μ̃^j`` of the phase speed ``Ω(r, μ) − ω̄``, as ``(i, j)``: the
 #: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
 FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
+#: Half-normal scale of the model error away from the recordings, ``s_e`` (log orbit size).
+EXTRAPOLATION_SCALE = 0.1
+#: Its correlation length as a fraction of the recordings' μ span Δμ.
+EXTRAPOLATION_LENGTH = 1.0 / 3.0
 #: Phases per orbit for the projection P (aliasing-free for K ≤ 8 with degree-3 terms).
 N_PHI = 32
 
@@ -444,3 +465,26 @@ def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):
     scale = r / reference_radius(spec, theta.get("a2", -1.0))
     u = scale * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
     return basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta
+
+
+def extrapolation_sd(mu, mu_data, length: float) -> np.ndarray:
+    r"""``c(μ) = √(1 − k_*ᵀ K⁻¹ k_*)``: a unit Gaussian process's sd at μ given zero at ``mu_data``.
+
+    Squared-exponential kernel ``k(μ, μ') = exp(−(μ − μ')²/2ℓ²)``; 0 at every
+    point of ``mu_data``, towards 1 far from them, 1 everywhere when ``mu_data``
+    is empty (module docstring, "Model error away from the recordings").
+
+    Args:
+        mu: Where, shape ``(n_mu,)``.
+        mu_data: The branch's training μ (repeats allowed), shape ``(m,)``.
+        length: Correlation length ``ℓ`` in units of μ.
+    """
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    x = np.unique(np.asarray(mu_data, dtype=float))
+    if x.size == 0:
+        return np.ones_like(mu)
+    K = np.exp(-0.5 * ((x[:, None] - x[None]) / length) ** 2)
+    ks = np.exp(-0.5 * ((x[:, None] - mu[None]) / length) ** 2)          # (m, n_mu)
+    explained = np.sum(ks * np.linalg.solve(K + 1e-10 * np.eye(x.size), ks), axis=0)
+    return np.sqrt(np.clip(1.0 - explained, 0.0, 1.0))
+

@@ -23,7 +23,7 @@ def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
     """Measured vs predicted time series with 90% bands, one panel per recording.
 
     Args:
-        bands: :class:`~bayeshopf.inference.speed.TimeSeriesBand` records
+        bands: :class:`~bayeshopf.diagnostics.bands.TimeSeriesBand` records
             (from :meth:`SpeedFit.time_series_bands`).
         mu_label: Name of μ for the panel titles.
         mu_units: Unit of μ.
@@ -60,9 +60,9 @@ def plot_frequency(bands, measured=None, *, predictive=None, mu_label: str = "mu
     """Oscillation frequency against μ: posterior median and 90% band per branch.
 
     Args:
-        bands: :class:`~bayeshopf.inference.speed.FrequencyBand` records (the curve).
+        bands: :class:`~bayeshopf.diagnostics.bands.FrequencyBand` records (the curve).
         measured: Optional ``(mu, frequency_hz, branch)`` triples of the recordings.
-        predictive: Optional predictive :class:`~bayeshopf.inference.speed.FrequencyBand`
+        predictive: Optional predictive :class:`~bayeshopf.diagnostics.bands.FrequencyBand`
             records (``frequency_band(..., predictive=True)``), drawn as dotted edges:
             where a new recording's frequency is expected.
         mu_label: Name of μ.

@@ -1,0 +1,74 @@
+"""Frequency and time-series bands: posterior summaries over μ and over time (immutable).
+
+Shared by both inference cores: :class:`~bayeshopf.posterior.HybridPosterior`
+(``frequency_band``, ``time_series_bands``) and the legacy speed stage
+(:mod:`bayeshopf.inference.speed`); drawn by :mod:`bayeshopf.plotting.timeseries`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TimeSeriesBand:
+    """Measured and predicted time series of one planar channel of one recording.
+
+    Attributes:
+        name: Recording name.
+        mu: μ of the recording.
+        branch: Its branch.
+        channel: Channel name.
+        units: Channel unit.
+        t: Times from the first sample (s), shape ``(n_t,)``.
+        measured: Measured channel, shape ``(n_t,)``.
+        median: Posterior median of the predicted channel.
+        lo: 5% quantile.
+        hi: 95% quantile.
+    """
+
+    name: str
+    mu: float
+    branch: str
+    channel: str
+    units: str
+    t: np.ndarray
+    measured: np.ndarray
+    median: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclass(frozen=True)
+class FrequencyBand:
+    """Posterior frequency (Hz) on a μ grid for one branch.
+
+    Attributes:
+        branch: ``"stable"`` or ``"unstable"``.
+        mu: μ grid, shape ``(n_mu,)``.
+        median: Median over the draws that have an LCO (nan where < half do).
+        lo: 5% quantile.
+        hi: 95% quantile.
+    """
+
+    branch: str
+    mu: np.ndarray
+    median: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @classmethod
+    def from_draws(cls, branch: str, mu, draws) -> FrequencyBand:
+        """Median and 90% band of frequency draws ``(n, n_mu)`` (``nan``: no LCO in a draw).
+
+        ``nan`` where fewer than half the draws have the branch.
+        """
+        draws = np.asarray(draws, dtype=float)
+        ok = np.isfinite(draws).mean(axis=0) >= 0.5
+        with warnings.catch_warnings():      # all-nan columns: no draw has the branch there
+            warnings.simplefilter("ignore", RuntimeWarning)
+            q = np.where(ok, np.nanquantile(draws, [0.5, 0.05, 0.95], axis=0), np.nan)
+        return cls(branch, np.asarray(mu, dtype=float), q[0], q[1], q[2])
