@@ -106,7 +106,7 @@ def test_amplitude_is_the_peak_to_peak_of_z1_in_physical_units():
 
 
 def test_extrapolation_sd_is_the_gaussian_process_conditional():
-    """Zero at the data, the one-point closed form √(1 − e^{−d²/ℓ²}), 1 far away and with no data."""
+    """Zero at the data, the one-point closed form √(1 − e^{−d²/ℓ²}), 1 far away or without data."""
     ell = 0.8
     d = np.array([0.0, 0.3, 0.8, 2.0])
     np.testing.assert_allclose(cm.extrapolation_sd(15.0 + d, [15.0], ell),
