@@ -89,8 +89,9 @@ def release_compiled() -> None:
     its programs instead of compiling.
     """
     from bayeshopf import posterior
-    from bayeshopf.model import hybrid
+    from bayeshopf.model import collapsed, hybrid
 
     hybrid.clear_spec_jits()
+    collapsed.clear_jits()
     posterior.clear_orbit_jits()
     jax.clear_caches()

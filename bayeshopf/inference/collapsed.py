@@ -207,18 +207,20 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     opt = optax.lbfgs()
     value_and_grad = optax.value_and_grad_from_state(potential)
 
-    def cond(carry):
-        _, _, i, g = carry
-        return (i < max_steps) & (jnp.linalg.norm(g) >= MAP_GTOL)
+    def cond(carry):      # optax's own recipe: the gradient the line search left at x
+        _, state = carry
+        i = optax.tree_utils.tree_get(state, "count")
+        g = optax.tree_utils.tree_get(state, "grad")
+        return (i == 0) | ((i < max_steps) & (optax.tree_utils.tree_l2_norm(g) >= MAP_GTOL))
 
     def body(carry):
-        x, state, i, _ = carry
+        x, state = carry
         v, g = value_and_grad(x, state=state)
         updates, state = opt.update(g, state, x, value=v, grad=g, value_fn=potential)
-        return optax.apply_updates(x, updates), state, i + 1, g
+        return optax.apply_updates(x, updates), state
 
-    g0 = jax.grad(potential)(x)
-    x, _, n, _ = jax.jit(lambda x: jax.lax.while_loop(cond, body, (x, opt.init(x), 0, g0)))(x)
+    x, state = jax.jit(lambda x: jax.lax.while_loop(cond, body, (x, opt.init(x))))(x)
+    n = optax.tree_utils.tree_get(state, "count")
     v, g = jax.value_and_grad(potential)(x)
     gnorm = float(jnp.linalg.norm(g))
     if not np.isfinite(float(v)):

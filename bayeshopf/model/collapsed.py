@@ -407,6 +407,47 @@ def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
     return coeffs_se**2 + sigma[:, None] ** 2 + (sigma_rel * coeffs) ** 2
 
 
+def coefficient_marginals(spec: CollapsedSpec, theta: dict, tau_mu, tau_shape, sigma,
+                          sigma_rel, mu, sign, coeffs, coeffs_se):
+    """``log p(y_c | θ)`` of both channels, the map integrated out, shape ``(2,)``."""
+    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+    sd = prior_sd(spec, tau_mu, tau_shape)
+    var = error_variance(coeffs, coeffs_se, sigma, sigma_rel)
+    return jnp.stack([log_marginal(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd)
+                      for c in range(2)])
+
+
+def frequency_marginal(spec: CollapsedSpec, theta: dict, sigma_omega, mu, sign, omega, omega_se):
+    """``log p(ω | θ)``, the frequency's coefficients ``γ`` integrated out."""
+    return log_marginal(frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
+                        omega_se**2 + sigma_omega**2, frequency_prior_sd(spec))
+
+
+_JITS: dict[tuple, tuple] = {}
+
+
+def _jitted(spec: CollapsedSpec, fn):
+    """``fn`` with ``spec`` bound, compiled once per spec.
+
+    NumPyro runs the model eagerly to find its sites (``initialize_model``), and
+    eagerly every operation of the marginal is compiled on its own: 14 s on the
+    rig with an empty compilation cache, against one compiled call this way.
+    Inside NUTS's own jit the call is inlined.
+    """
+    key = (id(spec), fn.__name__)
+    hit = _JITS.get(key)
+    if hit is None or hit[0] is not spec:
+        if len(_JITS) > 32:
+            _JITS.clear()
+        hit = _JITS[key] = (spec, jax.jit(lambda *a: fn(spec, *a)))
+    return hit[1]
+
+
+def clear_jits() -> None:
+    """Forget the compiled marginals of every spec (``inference.cache.release_compiled``)."""
+    _JITS.clear()
+
+
 def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None,
                     omega_se=None):
     """NumPyro model of the nonlinear parameters, the map integrated out.
@@ -423,19 +464,15 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
     """
     theta = normal_form_sites(spec)
     tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
-    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
-    sd = prior_sd(spec, tau_mu, tau_shape)
-    var = error_variance(coeffs, coeffs_se, sigma, sigma_rel)
+    marginals = _jitted(spec, coefficient_marginals)(theta, tau_mu, tau_shape, sigma, sigma_rel,
+                                                     mu, sign, coeffs, coeffs_se)
     for c in range(2):
-        y = coeffs[:, c].reshape(-1)
-        d = var[:, c].reshape(-1)
-        numpyro.factor(f"marginal_{c}", log_marginal(Phi, y, d, sd))
+        numpyro.factor(f"marginal_{c}", marginals[c])
     if spec.omega_centre is not None and omega is not None:
         sigma_omega = numpyro.sample(
             "sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
-        numpyro.factor("marginal_omega", log_marginal(
-            frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
-            omega_se**2 + sigma_omega**2, frequency_prior_sd(spec)))
+        numpyro.factor("marginal_omega", _jitted(spec, frequency_marginal)(
+            theta, sigma_omega, mu, sign, omega, omega_se))
 
 
 def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
