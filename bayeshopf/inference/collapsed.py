@@ -67,6 +67,7 @@ class CollapsedSettings:
         dense_mass: Adapt a dense mass matrix (the gaps, ``w`` and ``τ_μ`` are
             correlated: on the rig it halves the tree size and doubles the ESS
             per draw against a diagonal one; ``benchmarks/nuts_mass.json``).
+        target_accept: NUTS's target acceptance probability during warm-up.
         svi_steps: SVI steps (``inference="svi"``).
         n_svi_draws: Draws of the SVI posterior.
         lbfgs_steps: Most L-BFGS steps of the MAP.
@@ -85,6 +86,7 @@ class CollapsedSettings:
     num_warmup: int = 500
     num_samples: int = 500
     dense_mass: bool = True
+    target_accept: float = 0.8
     svi_steps: int = 3000
     n_svi_draws: int = 2000
     lbfgs_steps: int = 300
@@ -237,7 +239,8 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
     latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
     mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent),
-                     dense_mass=settings.dense_mass),
+                     dense_mass=settings.dense_mass,
+                     target_accept_prob=settings.target_accept),
                 num_warmup=settings.num_warmup, num_samples=settings.num_samples,
                 num_chains=settings.num_chains, chain_method="sequential", progress_bar=False)
     # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
