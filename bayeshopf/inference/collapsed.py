@@ -223,8 +223,8 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
 
     x, state = jax.jit(lambda x: jax.lax.while_loop(cond, body, (x, opt.init(x))))(x)
     n = optax.tree_utils.tree_get(state, "count")
-    v, g = jax.value_and_grad(potential)(x)
-    gnorm = float(jnp.linalg.norm(g))
+    v = optax.tree_utils.tree_get(state, "value")     # the line search's, at x: not recomputed
+    gnorm = float(optax.tree_utils.tree_l2_norm(optax.tree_utils.tree_get(state, "grad")))
     if not np.isfinite(float(v)):
         raise FitError("MAP: the log density is not finite at the optimum")
     z = unravel(x)
