@@ -23,7 +23,7 @@ import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand
-from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, _quantiles
+from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, quantiles
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import FitError
@@ -282,8 +282,8 @@ class HybridPosterior:
         rng = np.random.default_rng(self.seed)
         ce = self._away_from_data(c, mu, branch)
         amp_p = self._amplitude_of(ce + self._noise_sd(ce) * rng.standard_normal(c.shape))
-        q, p = _quantiles(amp)
-        qp, _ = _quantiles(amp_p)
+        q, p = quantiles(amp)
+        qp, _ = quantiles(amp_p)
         return BranchBand(int(_sign(branch)), np.asarray(mu), q, p, qp)
 
     def diagram(self, mu=None) -> BifurcationDiagram:
@@ -336,6 +336,21 @@ class HybridPosterior:
             names=f.names, mu=f.mu, unstable=f.unstable, measured=f.amplitude,
             curve=tuple(curve), predictive=tuple(pred), amplitude_p=np.array(p_amp),
             coeff_p=coeff_p, coeff_z=coeff_z)
+
+    @cached_property
+    def log_likelihood(self) -> np.ndarray:
+        """``log p(y_i | y_{−i}, θ_s)`` per chain, draw and recording, ``(chains, draws, n_rec)``.
+
+        The pointwise log-likelihood of PSIS-LOO for this non-factorised model
+        (:func:`~bayeshopf.model.collapsed.pointwise_log_likelihood`): given θ
+        the map is refitted exactly without recording i.
+        """
+        chains = self.run.chains
+        shape = next(iter(chains.values())).shape[:2]
+        theta = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()
+                 if k in self.map_point.params}
+        ll = log_likelihood_draws(self.spec, theta, self.features)
+        return ll.reshape(shape + (self.features.n_recordings,))
 
     def orbit_error(self) -> list[dict]:
         """Each recording's posterior-median orbit against its measured mean orbit.
@@ -573,6 +588,60 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
     return d
 
 
+def log_likelihood_draws(spec: cm.CollapsedSpec, theta: dict,
+                         features: HarmonicFeatures) -> np.ndarray:
+    """``log p(y_i | y_{−i}, θ_s)`` for draws θ_s of a model ``spec`` and features, ``(n, n_rec)``.
+
+    ``spec`` may be that of a fit without some of the recordings (an exact
+    leave-one-out refit): the map is then conditioned on the others only.
+    ``nan`` where a draw has no LCO on a recording's branch.
+    """
+    kw = ci.model_arguments(spec, features)
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+
+    def one(t):
+        return cm.pointwise_log_likelihood(spec, t, kw["mu"], kw["sign"], kw["coeffs"],
+                                           kw["coeffs_se"], kw["omega"], kw["omega_se"])
+
+    return np.asarray(jax.jit(lambda th: jax.lax.map(one, th))(th))
+
+
+def _features(recordings: RecordingSet | HarmonicFeatures, settings: ci.CollapsedSettings
+              ) -> tuple[HarmonicFeatures, tuple[str, str, str]]:
+    """The features of the recordings and the labels ``(μ name, μ unit, amplitude unit)``."""
+    if isinstance(recordings, RecordingSet):
+        features = extract_harmonics(recordings, n_harmonics=settings.n_harmonics,
+                                     segment_periods=settings.segment_periods)
+        return features, (recordings.mu_label, recordings.mu_units, recordings.units[0])
+    return recordings, ("mu", "", recordings.frame.units[0])
+
+
+def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, seed: int,
+                  settings: ci.CollapsedSettings, progress: bool, timings: dict
+                  ) -> HybridPosterior:
+    t0 = time.perf_counter()
+    spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
+                         unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
+                         frequency=settings.frequency)
+    kwargs = ci.model_arguments(spec, features)
+    timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if progress:
+        print(f"MAP ({criticality}): deterministic start and L-BFGS", file=sys.stderr)
+    map_point = ci.fit_map(kwargs, max_steps=settings.lbfgs_steps)
+    timings["map"] = time.perf_counter() - t0
+    run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress)
+    timings["posterior"] = run.seconds
+    post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
+                           timings=timings)
+    t0 = time.perf_counter()
+    # filled in place while the record is being built, so that the predicted
+    # coefficients cached for the checks serve the caller's ppc() too
+    post.diagnostics.update(diagnose(post))
+    timings["diagnostics"] = time.perf_counter() - t0
+    return post
+
+
 def fit_hybrid(
     recordings: RecordingSet | HarmonicFeatures,
     criticality: str = "subcritical",
@@ -604,32 +673,73 @@ def fit_hybrid(
     if compilation_cache:
         enable_compilation_cache()
     release_compiled()      # a process fitting many data sets would exhaust vm.max_map_count
-    timings = {}
     t0 = time.perf_counter()
-    if isinstance(recordings, RecordingSet):
-        features = extract_harmonics(recordings, n_harmonics=settings.n_harmonics,
-                                     segment_periods=settings.segment_periods)
-        labels = recordings.mu_label, recordings.mu_units, recordings.units[0]
-    else:
-        features = recordings
-        labels = "mu", "", features.frame.units[0]
-    spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
-                         unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
-                         frequency=settings.frequency)
-    kwargs = ci.model_arguments(spec, features)
-    timings["features"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    if progress:
-        print("MAP: deterministic start and L-BFGS", file=sys.stderr)
-    map_point = ci.fit_map(kwargs, max_steps=settings.lbfgs_steps)
-    timings["map"] = time.perf_counter() - t0
-    run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress)
-    timings["posterior"] = run.seconds
-    post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
-                           timings=timings)
-    t0 = time.perf_counter()
-    # filled in place while the record is being built, so that the predicted
-    # coefficients cached for the checks serve the caller's ppc() too
-    post.diagnostics.update(diagnose(post))
-    timings["diagnostics"] = time.perf_counter() - t0
-    return post
+    features, labels = _features(recordings, settings)
+    timings = {"features": time.perf_counter() - t0}
+    return _fit_features(features, labels, criticality, seed, settings, progress, timings)
+
+
+def fit_auto(
+    recordings: RecordingSet | HarmonicFeatures,
+    *,
+    seed: int = 0,
+    settings: ci.CollapsedSettings | None = None,
+    progress: bool = True,
+    exact_loo: bool = False,
+) -> tuple[HybridPosterior, dict]:
+    """Fit both normal forms and let leave-one-out choose the criticality.
+
+    Both models are fitted to the same features. The supercritical model has
+    one LCO per μ, so it ignores the branch labels and must explain every
+    orbit, labelled stable or unstable, as that one LCO. They are compared by
+    the expected log predictive density of each recording given the others
+    (:func:`~bayeshopf.diagnostics.comparison.compare_criticality`): PSIS-LOO
+    over the posterior of θ with the exact conditional ``p(y_i | y_{−i}, θ)``
+    (the map refitted in closed form without recording ``i``,
+    :attr:`HybridPosterior.log_likelihood`). Two recordings at one μ whose
+    amplitudes differ by many times their spread over segments decide for the
+    subcritical model whatever the ELPD: one LCO per μ cannot give them.
+
+    Args:
+        recordings: The recordings, or their features.
+        seed: Seed of every fit.
+        settings: Settings of every fit.
+        progress: Show progress.
+        exact_loo: Refit a model without every recording whose PSIS Pareto k
+            exceeds 0.7 (ArviZ ``reloo``) and use the exact leave-one-out
+            density ``log mean_s p(y_i | y_{−i}, θ_s^{(−i)})`` there (one fit each).
+
+    Returns:
+        ``(fit, evidence)``: the preferred fit, and the evidence of
+        :func:`~bayeshopf.diagnostics.comparison.compare_criticality` with
+        ``branch_labels`` added.
+    """
+    from dataclasses import replace
+
+    from bayeshopf.diagnostics.comparison import compare_criticality
+
+    settings = settings or ci.CollapsedSettings()
+    enable_compilation_cache()
+    features, labels = _features(recordings, settings)
+    by_model = {"subcritical": features,
+                "supercritical": replace(features, unstable=np.zeros_like(features.unstable))}
+    fits = {}
+    for name, f in by_model.items():
+        release_compiled()
+        fits[name] = _fit_features(f, labels, name, seed, settings, progress, {})
+        fits[name].log_likelihood      # noqa: B018 (computed while its jits are alive)
+
+    def refit(name: str, i: int) -> np.ndarray:
+        release_compiled()
+        keep = [j for j in range(features.n_recordings) if j != i]
+        if progress:
+            print(f"exact leave-one-out: {name} without {features.names[i]}", file=sys.stderr)
+        p = _fit_features(by_model[name].subset(keep), labels, name, seed, settings, False, {})
+        theta = {k: v for k, v in p.samples.items() if k in p.map_point.params}
+        ll = log_likelihood_draws(p.spec, theta, by_model[name])[:, i]
+        return np.where(np.isfinite(ll), ll, -np.inf)
+
+    evidence = compare_criticality(fits, refit if exact_loo else None)
+    evidence["branch_labels"] = ("used by the subcritical model only"
+                                 if np.any(features.unstable) else "all stable")
+    return fits[evidence["preferred"]], evidence

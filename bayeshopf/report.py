@@ -6,8 +6,8 @@ A fit folder holds
   criticality, the amplitude unit, and every recording's measured and
   predicted amplitude, plus settings and stage timings;
 * ``posterior.nc``: the posterior draws as ArviZ InferenceData (netCDF), with
-  the replicated Fourier coefficients as the posterior predictive group;
-* ``model.json``: the model structure (:class:`ModelSpec`), enough to predict;
+  each recording's leave-one-out log-likelihood as its ``log_likelihood`` group;
+* ``model.json``: the model structure (:class:`CollapsedSpec`), enough to predict;
 * ``figures/*.png``.
 
 Every file is written to a staging folder first and moved into place with
@@ -32,77 +32,17 @@ import bayeshopf
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.diagnostics.summaries import Interval, interval
 from bayeshopf.errors import DataError, OutputError
-from bayeshopf.model.hybrid import ModelSpec
-from bayeshopf.pipeline import predict_amplitude
+from bayeshopf.model.collapsed import CollapsedSpec
 
 SUMMARY = "summary.json"
 POSTERIOR = "posterior.nc"
 MODEL = "model.json"
 FIGURES = "figures"
 
-#: Sites stored in ``posterior.nc`` under the posterior predictive group.
-_PREDICTIVE_SITES = ("coeffs_rep",)
-_DROPPED_SITES = ("coeffs_hat",)
 
 
 def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
-
-
-def summary_dict(fit, ppc=None, extra: dict | None = None) -> dict:
-    """The ``summary.json`` content of a :class:`~bayeshopf.pipeline.HopfFit`."""
-    ppc = fit.ppc() if ppc is None else ppc
-    fold = fit.interval("mu_fold")
-    recs = []
-    for i, name in enumerate(fit.features.names):
-        recs.append(
-            {
-                "file": name,
-                "mu": float(fit.features.mu[i]),
-                "branch": "unstable" if fit.features.unstable[i] else "stable",
-                "amplitude": float(fit.features.amplitude[i]),
-                "predicted": ppc.predictive[i].to_json(),
-                "curve": ppc.curve[i].to_json(),
-                "inside_ci90": bool(ppc.covered[i]),
-                "frequency_hz": abs(float(fit.features.frequency_hz[i])),
-            }
-        )
-    out = {
-        "mu0": fit.interval("mu0").to_json(),
-        "a2": fit.interval("a2").to_json(),
-        # the supercritical gauge fixes a2 = -1 and frees the quintic a4 = -κ
-        "a4": None if fit.interval("a4") is None else fit.interval("a4").to_json(),
-        "mu_fold": None if fold is None else fold.to_json(),
-        "criticality": fit.criticality,
-        "mu_label": fit.mu_label,
-        "mu_units": fit.mu_units,
-        "amplitude_units": fit.amplitude_units,
-        "amplitude_definition": "peak-to-peak of z1 over the orbit, from its Fourier "
-        "reconstruction",
-        "planar_channels": list(fit.spec.frame.names),
-        "recordings": recs,
-        "ppc": {
-            "amplitudes_inside_ci90": int(ppc.covered.sum()),
-            "n_recordings": int(ppc.covered.size),
-            "coefficients_inside_ci90": ppc.coeff_coverage,
-        },
-        "map": {k: _finite_or_none(float(np.asarray(fit.map.params[k])))
-                for k in ("mu0", "a2", "a4", "mu_fold") if k in fit.map.params},
-        "starts": [
-            {"map_loss": _finite_or_none(st.map_loss), "stacking_weight": st.weight,
-             "lpd_in_sample": _finite_or_none(st.lpd),
-             "map": {k: _finite_or_none(v) for k, v in st.map_values.items()}}
-            for st in fit.starts
-        ],
-        "seed": fit.seed,
-        "settings": dict(fit.settings.__dict__),
-        "n_draws": int(np.shape(fit.samples["mu0"])[0]),
-        "timings_s": {k: round(v, 3) for k, v in fit.timings.items()},
-        "bayeshopf_version": bayeshopf.__version__,
-    }
-    if extra:
-        out.update(extra)
-    return out
 
 
 def check_output_folder(out: str | os.PathLike[str], force: bool) -> Path:
@@ -135,44 +75,6 @@ def json_ready(obj):
 
 def _write_json(obj, path: Path) -> None:
     path.write_text(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
-
-
-def save_fit(fit, out: str | os.PathLike[str], *, force: bool = False, figures=None,
-             ppc=None, extra_summary: dict | None = None) -> Path:
-    """Write a fit folder atomically.
-
-    Args:
-        fit: The :class:`~bayeshopf.pipeline.HopfFit`.
-        out: The output folder.
-        force: Replace bayeshopf's files in a non-empty folder (others are kept).
-        figures: Optional callable ``figures(folder) -> list[Path]`` that draws
-            the figures into a folder (its time is recorded in the summary).
-        ppc: The posterior predictive check, if already computed.
-        extra_summary: More keys for ``summary.json``.
-
-    Returns:
-        The output folder.
-    """
-    def write(stage: Path) -> None:
-        nonlocal fit
-        timings = _draw_figures(figures, stage)
-        fit = replace(fit, timings={**fit.timings, **timings})
-        _write_json(summary_dict(fit, ppc, extra_summary), stage / SUMMARY)
-        _write_json(fit.spec.to_dict(), stage / MODEL)
-        samples = {k: v for k, v in fit.samples.items()
-                   if k not in _PREDICTIVE_SITES + _DROPPED_SITES}
-        idata = arviz_io.to_inference_data(
-            samples,
-            predictive={"coeffs": fit.samples["coeffs_rep"]},
-            observed={"coeffs": fit.features.coeffs},
-            constant={"mu": fit.features.mu, "unstable": fit.features.unstable.astype(int),
-                      "coeffs_sd": fit.features.coeffs_sd},
-            attrs={"criticality": fit.criticality, "seed": fit.seed,
-                   "bayeshopf_version": bayeshopf.__version__},
-        )
-        arviz_io.write_netcdf(idata, stage / POSTERIOR)
-
-    return _staged(out, force, write)
 
 
 def _draw_figures(figures, stage: Path) -> dict:
@@ -210,8 +112,6 @@ def _staged(out, force: bool, write) -> Path:
         shutil.rmtree(stage, ignore_errors=True)
     return out
 
-
-# ------------------------------------------------------------------ collapsed core
 
 #: ``model.json``'s ``core`` for fits of :func:`bayeshopf.posterior.fit_hybrid`.
 COLLAPSED_CORE = "collapsed"
@@ -277,12 +177,25 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
 
 def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figures=None,
                 ppc=None, extra_summary: dict | None = None) -> Path:
-    """Write a collapsed-core fit folder atomically (as :func:`save_fit`).
+    """Write a fit folder atomically.
 
     ``posterior.nc`` holds the draws by chain of every site, the map's
     coefficients ``beta`` and the frequency's ``gamma`` (one exact draw per
-    posterior draw); ``model.json`` the model structure and the predictive
-    standard errors of a new recording.
+    posterior draw), and, as its ``log_likelihood`` group, each recording's
+    ``log p(y_i | y_{−i}, θ)`` (for ``az.loo``); ``model.json`` the model
+    structure and the predictive standard errors of a new recording.
+
+    Args:
+        post: The :class:`~bayeshopf.posterior.HybridPosterior`.
+        out: The output folder.
+        force: Replace bayeshopf's files in a non-empty folder (others are kept).
+        figures: Optional callable ``figures(folder) -> list[Path]`` that draws
+            the figures into a folder (its time is recorded in the summary).
+        ppc: The posterior predictive check, if already computed.
+        extra_summary: More keys for ``summary.json``.
+
+    Returns:
+        The output folder.
     """
     def write(stage: Path) -> None:
         nonlocal post
@@ -301,6 +214,11 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
             chains["gamma"] = post.run.gammas.reshape((n_chain, n_draw) + post.run.gammas.shape[1:])
         idata = arviz_io.chains_to_inference_data(
             chains,
+            log_likelihood={"y": post.log_likelihood},
+            dims={"y": ["recording"], "coeffs": ["recording", "frame_axis", "coefficient"],
+                  "coeffs_se": ["recording", "frame_axis", "coefficient"],
+                  "mu": ["recording"], "unstable": ["recording"]},
+            coords={"recording": list(post.features.names), "frame_axis": ["w1", "w2"]},
             observed={"coeffs": post.features.coeffs},
             constant={"mu": post.features.mu, "unstable": post.features.unstable.astype(int),
                       "coeffs_se": post.features.coeffs_se},
@@ -400,46 +318,8 @@ class SavedHybrid:
         return float(np.isfinite(self._draws(mu, branch, False)).mean())
 
 
-@dataclass(frozen=True)
-class SavedFit:
-    """A fit read back from its folder.
-
-    Attributes:
-        folder: Where it was read from.
-        spec: The model structure.
-        samples: Posterior draws of every site.
-        summary: The content of ``summary.json``.
-    """
-
-    folder: Path
-    spec: ModelSpec
-    samples: dict
-    summary: dict
-
-    def predict(self, mu: float, branch: str = "stable", predictive: bool = False) -> Interval:
-        """Amplitude median and 90% interval at μ on ``branch``.
-
-        Raises:
-            DataError: When the branch does not exist at μ in any posterior draw.
-        """
-        draws = predict_amplitude(self.samples, self.spec, [mu], branch, predictive)[:, 0]
-        p = float(np.isfinite(draws).mean())
-        if p == 0.0:
-            raise DataError(
-                f"--mu {mu:g}: the {branch} branch does not exist there in any posterior "
-                f"draw (Hopf point μ0 ≈ {np.median(self.samples['mu0']):.4g}"
-                + (f", fold ≈ {self.summary['mu_fold']['median']:.4g}"
-                   if self.summary.get("mu_fold") else "") + ")"
-            )
-        return interval(draws)
-
-    def p_exists(self, mu: float, branch: str = "stable") -> float:
-        """Posterior probability that ``branch`` exists at μ."""
-        return float(np.isfinite(predict_amplitude(self.samples, self.spec, [mu], branch)).mean())
-
-
-def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
-    """Read a fit folder written by :func:`save_fit`.
+def load_fit(folder: str | os.PathLike[str]) -> SavedHybrid:
+    """Read a fit folder written by :func:`save_hybrid`.
 
     Raises:
         DataError: When a file is missing or unreadable.
@@ -453,20 +333,16 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedFit:
     try:
         summary = json.loads((folder / SUMMARY).read_text())
         model = json.loads((folder / MODEL).read_text())
-        if model.get("core") == COLLAPSED_CORE:
-            from bayeshopf.model.collapsed import CollapsedSpec
-
-            spec = CollapsedSpec.from_dict(model["spec"])
-        else:
-            spec = ModelSpec.from_dict(model)
+        if model.get("core") != COLLAPSED_CORE:
+            raise DataError(f"{folder / MODEL}: expected \"core\": \"{COLLAPSED_CORE}\"; found "
+                            f"{model.get('core')!r}, a fit of the removed legacy inference "
+                            "core: fit the recordings again")
+        spec = CollapsedSpec.from_dict(model["spec"])
     except (ValueError, KeyError, TypeError) as e:
         raise DataError(f"{folder}: summary.json or model.json is not readable ({e})") from None
     try:
         samples, _ = arviz_io.read_posterior(folder / POSTERIOR)
     except Exception as e:  # netCDF/HDF5 raise many types
         raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
-    if model.get("core") == COLLAPSED_CORE:
-        return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]),
-                           float(model.get("predictive_omega_se", 0.0)),
-                           model.get("extrapolation"))
-    return SavedFit(folder, spec, samples, summary)
+    return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]),
+                       float(model.get("predictive_omega_se", 0.0)), model.get("extrapolation"))

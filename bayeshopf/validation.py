@@ -1,14 +1,25 @@
-"""Leave-one-out refits: how well each fit predicts a recording it has not seen.
+r"""Leave-one-out refits on the collapsed core: how well a fit predicts a recording it has not seen.
 
-For each recording i the model is refitted on the others, and the held-out
-amplitude ``A_i`` is compared with the prediction at its μ and branch:
+The harmonic features of all recordings are extracted once, in one planar
+frame (:func:`~bayeshopf.features.harmonics.extract_harmonics`); for each
+recording ``i`` the model is refitted on the others
+(:func:`~bayeshopf.posterior.fit_hybrid`), and the held-out amplitude ``A_i``
+(peak-to-peak of z1) is compared with the prediction at its μ and branch:
 
-* Bayesian (:func:`bayeshopf.pipeline.fit`): the posterior median and the 90%
-  band of a new recording (posterior predictive, with the scatter σ);
-* MAP (the same fit's optimum, no posterior) and maximum likelihood
-  (:func:`bayeshopf.pipeline.fit_point` without priors, the paper's fit): the
-  point prediction, and a plug-in band (parameters fixed at the optimum, only
-  the fitted scatter random).
+* ``"bayes"``: the posterior median and the 90% band of a *new* measurement,
+  :meth:`~bayeshopf.posterior.HybridPosterior.amplitude` with ``predictive=True``
+  and the held-out recording's own standard errors: the model's coefficients
+  scaled by the model error away from the recordings, plus
+  ``N(0, se² + σ_c² + (σ_rel c)²)`` noise;
+* ``"map"``: a plug-in prediction from the same fit's MAP point (no posterior):
+  the nonlinear parameters ``θ̂`` at the MAP, the map coefficients at their
+  conditional mean ``β̂ = E[β | y, θ̂] = V^{1/2} A^{-1} b``
+  (:func:`~bayeshopf.model.collapsed.conditional_draw`), the point prediction
+  the amplitude of that orbit, and a plug-in band from the fitted noise scales
+  only, ``c + N(0, se² + σ̂_c² + (σ̂_rel c)²)``.
+
+The paper's maximum-likelihood fit (``"ml"``) lived on the legacy inference
+core and is not offered here.
 
 Robustness is then the held-out error ``|Â_i − A_i| / A_i``, the coverage of the
 90% bands, and how far the fold ``μ_SN`` moves from fold to fold. With few
@@ -22,22 +33,33 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import jax.numpy as jnp
 import numpy as np
 from scipy.stats import binom
 from tqdm.auto import tqdm
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.summaries import CI, interval
-from bayeshopf.features.orbits import extract_features
-from bayeshopf.pipeline import FitSettings, HopfFit, PointFit, fit, fit_point
+from bayeshopf.errors import FitError
+from bayeshopf.features.harmonics import HarmonicFeatures, extract_harmonics
+from bayeshopf.inference.collapsed import CollapsedSettings
+from bayeshopf.model import collapsed as cm
+from bayeshopf.posterior import (
+    HybridPosterior,
+    amplitude_of,
+    fit_hybrid,
+    noise_sd,
+    orbit_coefficients,
+)
 
 #: The fits compared, in the order reported.
-METHODS = ("bayes", "map", "ml")
+METHODS = ("bayes", "map")
 METHOD_LABELS = {
     "bayes": "Bayesian (posterior)",
-    "map": "MAP only",
-    "ml": "maximum likelihood (paper)",
+    "map": "MAP plug-in",
 }
+#: Noise draws of a plug-in band.
+N_PLUG_IN_DRAWS = 2000
 
 
 @dataclass(frozen=True)
@@ -45,11 +67,12 @@ class HeldOut:
     """One method's prediction of one held-out recording.
 
     Attributes:
-        median: Predicted amplitude (posterior median, or the point prediction).
-        lo: Lower end of the 90% band (plug-in band for point fits).
+        median: Predicted amplitude (posterior median, or the plug-in point prediction).
+        lo: Lower end of the 90% band.
         hi: Upper end of the 90% band.
-        p_exists: Share of draws with an LCO on that branch at that μ.
-        mu_fold: ``(median, lo, hi)`` of the fold (``lo = hi = median`` for point fits).
+        p_exists: Share of draws with an LCO on that branch at that μ (0 or 1 for a plug-in).
+        mu_fold: ``(median, lo, hi)`` of the fold (``lo = hi = median`` for a plug-in;
+            ``nan`` for a supercritical fit).
         mu0: ``(median, lo, hi)`` of the Hopf point.
     """
 
@@ -72,7 +95,8 @@ class Fold:
         measured: Its measured amplitude (peak-to-peak of z1).
         measured_sd: Spread of the measured amplitude over segments.
         predictions: Method name → :class:`HeldOut`.
-        fits: Method name → the fit (kept only when asked).
+        fit: The fold's :class:`~bayeshopf.posterior.HybridPosterior` (kept only when asked;
+            both methods come from it).
     """
 
     name: str
@@ -81,10 +105,10 @@ class Fold:
     measured: float
     measured_sd: float
     predictions: dict
-    fits: dict | None = None
+    fit: HybridPosterior | None = None
 
     def inside(self, method: str) -> bool:
-        """Whether the measured amplitude lies in ``method``'s 90% band."""
+        """Whether the measured amplitude lies in ``method``'s 90% band (ends included)."""
         p = self.predictions[method]
         return bool(p.lo <= self.measured <= p.hi)
 
@@ -95,17 +119,15 @@ class Fold:
 
 @dataclass(frozen=True)
 class LeaveOneOut:
-    """All folds, and the full-data fits they are compared with.
+    """All folds.
 
     Attributes:
-        folds: One :class:`Fold` per recording.
+        folds: One :class:`Fold` per held-out recording.
         methods: Methods compared.
-        full: Method name → fit on all recordings (kept only when asked).
     """
 
     folds: tuple[Fold, ...]
     methods: tuple[str, ...]
-    full: dict | None = None
 
     def coverage(self, method: str) -> int:
         """Number of folds whose held-out amplitude lies in the 90% band."""
@@ -115,7 +137,6 @@ class LeaveOneOut:
         """``P(X ≤ k)`` for ``X ~ Binomial(n_folds, CI)`` and ``k`` = :meth:`coverage`.
 
         ``CI`` is the mass of the bands (:data:`~bayeshopf.diagnostics.summaries.CI`, 0.9).
-
         The probability that calibrated 90% bands would hold this few held-out
         recordings or fewer; small values (below 0.05, say) mean the bands are
         too narrow.
@@ -136,7 +157,7 @@ class LeaveOneOut:
                 "coverage_p": self.coverage_p(m),
                 "mean_relative_error": float(np.nanmean(err)),
                 "max_relative_error": float(np.nanmax(err)),
-                "mu_fold_sd": float(np.nanstd(fold_mu, ddof=1)),
+                "mu_fold_sd": float(np.nanstd(fold_mu, ddof=1)) if fold_mu.size > 1 else np.nan,
                 "mu_fold_range": [float(np.nanmin(fold_mu)), float(np.nanmax(fold_mu))],
                 "mean_band_width": float(np.nanmean(width)),
             }
@@ -150,106 +171,193 @@ class LeaveOneOut:
             for m in self.methods:
                 p = f.predictions[m]
                 row[m] = {"median": p.median, "ci90": [p.lo, p.hi], "inside": f.inside(m),
-                          "relative_error": f.relative_error(m),
-                          "mu_fold": {"median": p.mu_fold[0], "ci90": list(p.mu_fold[1:])}}
+                          "relative_error": f.relative_error(m), "p_exists": p.p_exists,
+                          "mu_fold": {"median": p.mu_fold[0], "ci90": list(p.mu_fold[1:])},
+                          "mu0": {"median": p.mu0[0], "ci90": list(p.mu0[1:])}}
             rows.append(row)
         return rows
 
 
-def _bayes_prediction(fit_: HopfFit, mu: float, branch: str) -> HeldOut:
-    amp = fit_.amplitude([mu], branch, predictive=True)[:, 0]
+# ----------------------------------------------------------------- the MAP plug-in
+def map_theta(post: HybridPosterior) -> dict:
+    """The nonlinear parameters ``θ̂`` at the MAP, each with a leading axis of one draw.
+
+    Raises:
+        FitError: If the MAP point lacks a site the orbits need.
+    """
+    p = post.map_point.params
+    missing = sorted(set(post.theta) - set(p))
+    if missing:
+        raise FitError(f"the MAP point has no {missing}; expected every site of the posterior "
+                       f"draws, found {sorted(p)}")
+    return {k: np.asarray(p[k], dtype=float)[None] for k in post.theta}
+
+
+def map_coefficients(post: HybridPosterior, theta: dict | None = None) -> np.ndarray:
+    r"""``β̂ = E[β | y, θ̂]`` per channel, ``(J, 2)``: the map at its conditional mean.
+
+    With ``Φ`` the design at ``θ̂``, ``V = diag(v(τ_μ, τ_s))`` the prior variances
+    and ``D = diag(se² + σ_c² + (σ_rel y)²)``, ``β̂_c = V^{1/2} A^{-1} b`` with
+    ``A = I + Φ'^T D^{-1} Φ'``, ``b = Φ'^T D^{-1} y_c``, ``Φ' = Φ V^{1/2}``
+    (:func:`~bayeshopf.model.collapsed.conditional_draw`, its second output).
+    """
+    th = {k: jnp.asarray(v[0]) for k, v in (theta or map_theta(post)).items()}
+    f, spec = post.features, post.spec
+    mu = jnp.asarray(f.mu)
+    sign = jnp.asarray(np.where(f.unstable, -1.0, 1.0))
+    Phi = cm.design(spec, mu, sign, th).reshape(-1, spec.n_basis)
+    sd = cm.prior_sd(spec, th["tau_mu"], th["tau_shape"])
+    coeffs = jnp.asarray(f.coeffs)
+    var = cm.error_variance(coeffs, jnp.asarray(f.coeffs_se), th["sigma"], th["sigma_rel"])
+    zero = jnp.zeros(spec.n_basis)
+    cols = [cm.conditional_draw(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd, zero)[1]
+            for c in range(2)]
+    return np.asarray(jnp.stack(cols, axis=-1))
+
+
+def plug_in_coefficients(post: HybridPosterior, mu, branch: str) -> np.ndarray:
+    """Harmonic coefficients of the MAP plug-in orbit at μ, ``(n_mu, 2, 2K+1)``; ``nan``: no LCO."""
+    if branch not in ("stable", "unstable"):
+        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    if branch == "unstable" and post.criticality != "subcritical":
+        return np.full((np.size(mu), 2, 2 * post.spec.n_harmonics + 1), np.nan)
+    theta = map_theta(post)
+    beta = map_coefficients(post, theta)
+    return orbit_coefficients(post.spec, theta, beta[None], np.atleast_1d(mu),
+                              1.0 if branch == "stable" else -1.0)[0]
+
+
+def plug_in_amplitude(post: HybridPosterior, mu, branch: str = "stable") -> np.ndarray:
+    """The MAP plug-in amplitude (peak-to-peak of z1) at μ, ``(n_mu,)``; ``nan`` where no LCO."""
+    return amplitude_of(post.spec, plug_in_coefficients(post, mu, branch))
+
+
+def plug_in_band(post: HybridPosterior, mu: float, branch: str, coeffs_se=None, *,
+                 n_draws: int = N_PLUG_IN_DRAWS, seed: int | None = None) -> np.ndarray:
+    """Amplitude draws of a new measurement under the plug-in, ``(n_draws,)``.
+
+    ``c + N(0, se² + σ̂_c² + (σ̂_rel c)²)`` with ``c`` the plug-in orbit at μ and
+    ``σ̂`` the MAP's noise scales (no parameter uncertainty, no model error away
+    from the data); ``coeffs_se`` defaults to the training recordings' median.
+    """
+    c = plug_in_coefficients(post, [mu], branch)                          # (1, 2, 2K+1)
+    p = post.map_point.params
+    se = np.median(post.features.coeffs_se, axis=0) if coeffs_se is None else coeffs_se
+    sd = noise_sd(c[None], np.asarray(p["sigma"])[None], np.asarray(p["sigma_rel"])[None], se)
+    rng = np.random.default_rng(post.seed if seed is None else seed)
+    reps = c[None] + sd * rng.standard_normal((n_draws,) + c.shape)       # (n, 1, 2, 2K+1)
+    return amplitude_of(post.spec, reps)[:, 0]
+
+
+# ----------------------------------------------------------------- predictions
+_NAN3 = (np.nan, np.nan, np.nan)
+
+
+def _triple(post: HybridPosterior, name: str) -> tuple[float, float, float]:
+    iv = post.interval(name)
+    return _NAN3 if iv is None else (iv.median, iv.lo, iv.hi)
+
+
+def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) -> HeldOut:
+    amp = post.amplitude([mu], branch, predictive=True, coeffs_se=coeffs_se)[:, 0]
     ok = np.isfinite(amp)
     iv = interval(amp[ok]) if ok.any() else None
-    fold = fit_.interval("mu_fold")
-    mu0 = fit_.interval("mu0")
-    nan3 = (np.nan, np.nan, np.nan)
-    return HeldOut(
-        median=iv.median if iv else np.nan, lo=iv.lo if iv else np.nan,
-        hi=iv.hi if iv else np.nan, p_exists=float(ok.mean()),
-        mu_fold=(fold.median, fold.lo, fold.hi) if fold else nan3,
-        mu0=(mu0.median, mu0.lo, mu0.hi),
-    )
+    return HeldOut(median=iv.median if iv else np.nan, lo=iv.lo if iv else np.nan,
+                   hi=iv.hi if iv else np.nan, p_exists=float(ok.mean()),
+                   mu_fold=_triple(post, "mu_fold"), mu0=_triple(post, "mu0"))
 
 
-def _point_prediction(fit_: PointFit, mu: float, branch: str) -> HeldOut:
-    point = float(fit_.amplitude([mu], branch)[0, 0])
-    band = fit_.amplitude([mu], branch, predictive=True)[:, 0]
+def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) -> HeldOut:
+    point = float(plug_in_amplitude(post, [mu], branch)[0])
+    band = plug_in_band(post, mu, branch, coeffs_se)
     band = band[np.isfinite(band)]
-    lo, hi = (np.quantile(band, [0.05, 0.95]) if band.size else (np.nan, np.nan))
-    fold, mu0 = fit_.value("mu_fold"), fit_.value("mu0")
+    lo, hi = np.quantile(band, [(1 - CI) / 2, (1 + CI) / 2]) if band.size else (np.nan, np.nan)
+    p = post.map_point.params
+    fold = float(p["mu_fold"]) if "mu_fold" in p else np.nan
+    mu0 = float(p["mu0"])
     return HeldOut(median=point, lo=float(lo), hi=float(hi), p_exists=float(np.isfinite(point)),
                    mu_fold=(fold, fold, fold), mu0=(mu0, mu0, mu0))
 
 
-def _point_from_bayes(fit_: HopfFit) -> PointFit:
-    """The Bayesian fit's own MAP as a :class:`PointFit` (no extra optimisation)."""
-    return PointFit(spec=fit_.spec, features=fit_.features, map=fit_.map, regularised=True,
-                    settings=fit_.settings, seed=fit_.seed)
+def predict_held_out(post: HybridPosterior, method: str, mu: float, branch: str,
+                     coeffs_se=None) -> HeldOut:
+    """Prediction of a new recording at ``(μ, branch)`` by ``method`` (``"bayes"`` or ``"map"``).
 
-
-def fit_methods(rs: RecordingSet, criticality: str, methods, *, seed: int,
-                settings: FitSettings) -> dict:
-    """Fit ``rs`` by each method (``"bayes"``, ``"map"``, ``"ml"``)."""
-    out = {}
-    if "bayes" in methods or "map" in methods:
-        bayes = fit(rs, criticality, seed=seed, settings=settings, progress=False)
-        if "bayes" in methods:
-            out["bayes"] = bayes
-        if "map" in methods:
-            out["map"] = _point_from_bayes(bayes)
-    if "ml" in methods:
-        out["ml"] = fit_point(rs, criticality, regularised=False, seed=seed, settings=settings,
-                              progress=False)
-    return out
-
-
-def predict_held_out(fit_, method: str, mu: float, branch: str) -> HeldOut:
-    """Prediction of a recording at ``(μ, branch)`` by a fit of the given method."""
+    Args:
+        post: A fit that has not seen the recording.
+        method: ``"bayes"`` or ``"map"``.
+        mu: Its μ.
+        branch: ``"stable"`` or ``"unstable"``.
+        coeffs_se: Its coefficients' standard errors in ``post``'s frame
+            ``(2, 2K+1)`` (default: the training recordings' median).
+    """
     if method == "bayes":
-        return _bayes_prediction(fit_, mu, branch)
-    return _point_prediction(fit_, mu, branch)
+        return _bayes_prediction(post, mu, branch, coeffs_se)
+    if method == "map":
+        return _map_prediction(post, mu, branch, coeffs_se)
+    raise FitError(f"method must be one of {METHODS}; got {method!r}")
 
 
 def leave_one_out(
-    rs: RecordingSet,
+    rs: RecordingSet | HarmonicFeatures,
     criticality: str = "subcritical",
     *,
     methods=METHODS,
     seed: int = 0,
-    settings: FitSettings | None = None,
+    settings: CollapsedSettings | None = None,
     folds=None,
     keep_fits: bool = False,
     progress: bool = True,
 ) -> LeaveOneOut:
     """Refit without each recording in turn and predict it.
 
+    The features are extracted once from all recordings (one frame), and each
+    fold's fit is :func:`~bayeshopf.posterior.fit_hybrid` on the others'
+    features; both methods come from that one fit.
+
     Args:
-        rs: All recordings.
+        rs: All recordings (or their features).
         criticality: Normal form of every fit.
-        methods: Any of ``"bayes"``, ``"map"``, ``"ml"``.
+        methods: Any of ``"bayes"``, ``"map"``.
         seed: Seed of every fit.
-        settings: Fit settings (the same for every fold).
+        settings: :class:`~bayeshopf.inference.collapsed.CollapsedSettings` (the same
+            for every fold; default settings when ``None``).
         folds: Names of the recordings to hold out (default: all).
-        keep_fits: Keep every fold's fits (for figures; memory grows with folds).
+        keep_fits: Keep every fold's fit (for figures; memory grows with folds).
         progress: Show a progress bar over folds.
 
     Returns:
         A :class:`LeaveOneOut`.
+
+    Raises:
+        FitError: For an unknown method or recording name.
     """
-    settings = settings or FitSettings()
+    settings = settings or CollapsedSettings()
+    methods = tuple(methods)
     unknown = set(methods) - set(METHODS)
     if unknown or not methods:
-        raise ValueError(f"methods must be among {METHODS}; got {tuple(methods)!r}")
+        hint = " (the maximum-likelihood fit was on the removed legacy core)" if "ml" in unknown \
+            else ""
+        raise FitError(f"methods must be among {METHODS}; got {methods!r}{hint}")
     methods = tuple(m for m in METHODS if m in methods)
-    features = extract_features(rs, n_h=settings.n_h)
-    names = list(rs.names) if folds is None else list(folds)
+    features = (rs if isinstance(rs, HarmonicFeatures) else
+                extract_harmonics(rs, n_harmonics=settings.n_harmonics,
+                                  segment_periods=settings.segment_periods))
+    all_names = list(features.names)
+    names = all_names if folds is None else list(folds)
+    missing = [n for n in names if n not in all_names]
+    if missing:
+        raise FitError(f"no recording named {missing}; expected some of {all_names}")
     out = []
     for name in tqdm(names, desc="leave-one-out", disable=not progress):
-        i = list(rs.names).index(name)
-        fits = fit_methods(rs.without(i), criticality, methods, seed=seed, settings=settings)
+        i = all_names.index(name)
+        keep = [j for j in range(features.n_recordings) if j != i]
+        post = fit_hybrid(features.subset(keep), criticality, seed=seed, settings=settings,
+                          progress=False)
         mu, branch = float(features.mu[i]), "unstable" if features.unstable[i] else "stable"
-        preds = {m: predict_held_out(fits[m], m, mu, branch) for m in methods}
+        preds = {m: predict_held_out(post, m, mu, branch, features.coeffs_se[i])
+                 for m in methods}
         out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
                         measured_sd=float(features.amplitude_sd[i]), predictions=preds,
-                        fits=fits if keep_fits else None))
+                        fit=post if keep_fits else None))
     return LeaveOneOut(folds=tuple(out), methods=methods)

@@ -13,6 +13,10 @@
    `$BAYESHOPF_FLUTTER_CBC`), runs the same analysis on them (no ground truth
    there).
 
+Both analyses include the Bayesian hybrid fit of the recordings
+(`bayeshopf.posterior.fit_hybrid` at the default `CollapsedSettings`, a minute
+or two each); its Hopf and fold intervals and its convergence are printed.
+
 ``BAYESHOPF_FAST=1`` skips the Bayesian hybrid fit and the wind-tunnel data
 (a smoke test of the whole flow, under a minute).
 """
@@ -53,8 +57,15 @@ def show(report) -> None:
     if d.get("hybrid"):
         h = d["hybrid"]
         print("hybrid fit of the recordings: " + "; ".join(
-            f"{k} {v['median']:.2f} [{v['ci90'][0]:.2f}, {v['ci90'][1]:.2f}]"
-            for k, v in h.items() if v))
+            f"{k} {h[k]['median']:.2f} [{h[k]['ci90'][0]:.2f}, {h[k]['ci90'][1]:.2f}]"
+            for k in ("hopf", "fold") if h.get(k)))
+        c, st = h["convergence"], h["settings"]
+        if c.get("r_hat") is not None:
+            print(f"  NUTS {st['num_chains']} chains x {st['num_samples']} draws: largest R-hat "
+                  f"{c['r_hat']:.3f}, smallest bulk ESS {c['ess_bulk']:.0f}, "
+                  f"{c['divergences']} divergences; converged: {c['ok']}")
+        for w in h["warnings"]:
+            print(f"  warning: {w}")
 
 
 def main(out: Path) -> None:

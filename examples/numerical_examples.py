@@ -88,11 +88,9 @@ def run(name: str, out: Path, settings: CollapsedSettings) -> dict:
 
     figures = {
         "bifurcation": plot_diagram_vs_truth(result, truth, rows, title=TITLES[name]),
-        "phase_portraits": plot_phase_portraits(result.samples, result.spec, rs,
-                                                truth=truth.orbit, orbits=result.orbits),
-        "held_out_phase_portraits": plot_phase_portraits(
-            result.samples, result.spec, held_out_recordings(truth), truth=truth.orbit,
-            orbits=result.orbits),
+        "phase_portraits": plot_phase_portraits(result, rs, truth=truth.orbit),
+        "held_out_phase_portraits": plot_phase_portraits(result, held_out_recordings(truth),
+                                                         truth=truth.orbit),
     }
     paths = [save_figure(fig, out / f"{name}_{key}.png") for key, fig in figures.items()]
     for p in paths:

@@ -27,11 +27,9 @@ def cbc_recordings():
 def cbc_auto(cbc_recordings):
     """``fit_auto`` on the rig at default settings, seed 0: ``(preferred fit, evidence)``.
 
-    Its subcritical fit is ``fit(rs, "subcritical", seed=0)`` at default settings
-    (the same call, so the same draws): test_wind_tunnel checks that fit, and
-    test_wind_tunnel_validation the criticality evidence, without fitting the
-    rig at default settings a third time.
+    Both normal forms fitted once per session (PSIS-LOO, no exact refits):
+    test_wind_tunnel_validation checks the criticality evidence.
     """
-    from bayeshopf.pipeline import fit_auto
+    from bayeshopf.posterior import fit_auto
 
     return fit_auto(cbc_recordings, seed=0, progress=False)

@@ -229,17 +229,30 @@ def test_predict_missing_fit_folder(tmp_path, capsys):
     assert "summary.json" in capsys.readouterr().err
 
 
-def test_legacy_options_on_the_collapsed_core_are_one_line_errors(good_data, tmp_path, capsys):
-    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--speed", "--quiet"])
+def test_removed_and_misused_options_are_one_line_errors(good_data, tmp_path, capsys):
+    with pytest.raises(SystemExit):           # --speed went with the legacy core: Ω is built in
+        main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--speed"])
+    assert "unrecognized arguments: --speed" in capsys.readouterr().err
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--nuts-check", "--quiet"])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "--core legacy" in err
+    assert code == 2 and len(err.splitlines()) == 1 and "needs --inference svi" in err
     assert not (tmp_path / "o").exists()
 
 
 def test_exact_loo_needs_criticality_auto(good_data, tmp_path, capsys):
-    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--exact-loo", "--quiet",
-                 "--core", "legacy"])
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--exact-loo", "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "--criticality auto" in err and "got --criticality sub" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_predict_on_a_fit_of_the_removed_core_is_a_one_line_error(tmp_path, capsys):
+    old = tmp_path / "old_fit"
+    old.mkdir()
+    (old / "summary.json").write_text("{}")
+    (old / "model.json").write_text('{"criticality": "subcritical"}')   # no "core"
+    (old / "posterior.nc").write_bytes(b"")
+    assert main(["predict", str(old), "--mu", "16"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "legacy inference core" in err and "model.json" in err

@@ -120,3 +120,27 @@ def test_extrapolation_sd_is_the_gaussian_process_conditional():
     mid = cm.extrapolation_sd([15.3], [14.9, 15.7], ell)[0]
     one = cm.extrapolation_sd([15.3], [14.9], ell)[0]
     assert mid < one
+
+
+def test_block_log_predictive_is_the_gaussian_conditional():
+    """Against the partitioned covariance: ``y_b | y_−b`` by scipy, block by block."""
+    rng = np.random.default_rng(4)
+    n_blocks, m = 4, 3
+    Phi = rng.standard_normal((n_blocks * m, 5))
+    sd = np.exp(0.3 * rng.standard_normal(5))
+    d = np.exp(rng.standard_normal(n_blocks * m)) * 0.2
+    y = rng.standard_normal(n_blocks * m)
+    S = Phi @ np.diag(sd**2) @ Phi.T + np.diag(d)
+    got = np.asarray(cm.block_log_predictive(Phi, y, d, sd, n_blocks))
+    for b in range(n_blocks):
+        i = np.arange(b * m, (b + 1) * m)
+        o = np.setdiff1d(np.arange(n_blocks * m), i)
+        K = S[np.ix_(i, o)] @ np.linalg.inv(S[np.ix_(o, o)])
+        cond = multivariate_normal(K @ y[o], S[np.ix_(i, i)] - K @ S[np.ix_(o, i)])
+        np.testing.assert_allclose(got[b], cond.logpdf(y[i]), rtol=1e-9)
+    # the blocks' densities do not sum to the joint (they are conditionals), but the chain
+    # rule does: log p(y) = log p(y_rest) + log p(y_last | y_rest)
+    rest = np.arange((n_blocks - 1) * m)
+    joint = multivariate_normal(np.zeros(n_blocks * m), S).logpdf(y)
+    marg = multivariate_normal(np.zeros(rest.size), S[np.ix_(rest, rest)]).logpdf(y[rest])
+    np.testing.assert_allclose(marg + got[-1], joint, rtol=1e-9)

@@ -100,13 +100,12 @@ def _fake_fit(pred_a0, sigma0, features, n_draws=200, seed=0):
     """A fit-like record whose draws predict a0 = pred_a0 (per recording) with scatter σ_0."""
     from types import SimpleNamespace
 
+    from scipy.stats import norm
+
     rng = np.random.default_rng(seed)
-    n_rec, n_c = features.coeffs.shape
-    hat = np.tile(features.coeffs, (n_draws, 1, 1))
-    hat[:, :, 0] = np.asarray(pred_a0)[None] + 1e-3 * rng.standard_normal((n_draws, n_rec))
-    sigma = np.full((n_draws, (n_c + 1) // 2), 0.01)
-    sigma[:, 0] = sigma0
-    return SimpleNamespace(samples={"sigma": sigma, "coeffs_hat": hat}, features=features)
+    pred = np.asarray(pred_a0)[None] + 1e-3 * rng.standard_normal((n_draws, len(pred_a0)))
+    ll = norm.logpdf(features.coeffs[:, 0][None], pred, sigma0)
+    return SimpleNamespace(log_likelihood=ll[None], features=features)
 
 
 def test_coexisting_orbits_overrule_an_elpd_that_prefers_one_lco_per_mu():
@@ -119,9 +118,8 @@ def test_coexisting_orbits_overrule_an_elpd_that_prefers_one_lco_per_mu():
     a0 = np.array([1.0, 0.6, 1.1, 1.2])
     coeffs = np.zeros((4, 5))
     coeffs[:, 0] = a0
-    features = SimpleNamespace(mu=mu, coeffs=coeffs, coeffs_sd=np.full((4, 5), 1e-3),
-                               amplitude=2 * a0, amplitude_sd=np.full(4, 0.01),
-                               names=("s1", "u1", "s15", "s2"))
+    features = SimpleNamespace(mu=mu, coeffs=coeffs, amplitude=2 * a0,
+                               amplitude_sd=np.full(4, 0.01), names=("s1", "u1", "s15", "s2"))
     # the subcritical draws miss recording 3 badly; the supercritical ones are vague everywhere
     sub = _fake_fit([1.0, 0.6, 1.1, 1.6], 0.02, features)
     sup = _fake_fit([0.8, 0.8, 1.1, 1.2], 0.25, features)
@@ -136,3 +134,16 @@ def test_coexisting_orbits_overrule_an_elpd_that_prefers_one_lco_per_mu():
     ev = compare_criticality({"subcritical": sub, "supercritical": sup})
     assert ev["preferred"] == ev["elpd_preferred"] == "supercritical"
     assert ev["decided_by"] == "elpd" and ev["coexisting"] == []
+
+
+def test_pooled_log_likelihood_pools_chains_and_counts_a_missing_branch_as_impossible():
+    from types import SimpleNamespace
+
+    from bayeshopf.diagnostics.comparison import pooled_log_likelihood
+
+    ll = np.arange(2 * 3 * 4, dtype=float).reshape(2, 3, 4)
+    ll[1, 2, 3] = np.nan
+    out = pooled_log_likelihood(SimpleNamespace(log_likelihood=ll))
+    assert out.shape == (6, 4)
+    np.testing.assert_array_equal(out[:3], ll[0])
+    assert out[5, 3] == -np.inf and np.isfinite(np.delete(out.ravel(), 23)).all()

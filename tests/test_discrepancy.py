@@ -208,6 +208,89 @@ def test_report_markdown_and_figures_of_a_blind_run(flutter, tmp_path):
     assert np.isfinite(rep.to_json()["fit"]["after"]["fold"])
 
 
+# ------------------------------------------------------------- the hybrid fit
+
+
+class _FakePosterior:
+    """What :func:`hybrid_summary` reads of a HybridPosterior, with one failed site."""
+
+    def __init__(self, settings, seed):
+        from bayeshopf.diagnostics.summaries import Interval
+
+        self.settings, self.seed = settings, seed
+        self.timings = {"map": 1.0, "posterior": 2.0}
+        self._iv = {"mu0": Interval(18.27, 18.26, 18.29), "mu_fold": Interval(15.17, 15.16, 15.18)}
+        self.diagnostics = {
+            "map": {"grad_norm": 3e-5, "converged": True},
+            "posterior": {"method": "nuts", "chains": 4, "divergences": 2, "r_hat_max": 1.01,
+                          "ess_min": 400,
+                          "sites": {"mu0": {"r_hat": 1.002, "ess_bulk": 900.0, "ok": True},
+                                    "mu_fold": {"r_hat": 1.02, "ess_bulk": 350.0, "ok": False}}},
+            "warnings": ["NUTS: mu_fold has R̂ 1.020 and bulk ESS 350", "NUTS: 2 divergent"]}
+
+    def interval(self, name, mass=0.9):
+        return self._iv.get(name)
+
+
+def test_hybrid_fit_is_the_collapsed_core_at_default_settings(flutter, monkeypatch):
+    """``hybrid=True`` calls fit_hybrid (subcritical, the seed, CollapsedSettings()) and
+    reports its intervals, settings and convergence under "hybrid"."""
+    import bayeshopf.posterior as bp
+    from bayeshopf.inference.collapsed import CollapsedSettings
+
+    calls = []
+
+    def fake_fit_hybrid(recordings, criticality, *, seed, settings, progress):
+        calls.append((criticality, seed, settings))
+        return _FakePosterior(settings, seed)
+
+    monkeypatch.setattr(bp, "fit_hybrid", fake_fit_hybrid)
+    rs, _ = _blind(flutter, "h_cubic_damping", 20.0)
+    rep = analyse(rs, flutter, seed=3, hybrid=True, kinds=("cubic_damping",),
+                  point_intervals=False)
+    assert calls == [("subcritical", 3, CollapsedSettings())]
+    h = json.loads(json.dumps(rep.to_json()))["hybrid"]           # JSON-serialisable
+    assert h["hopf"] == {"median": 18.27, "ci90": [18.26, 18.29]}
+    assert h["fold"] == {"median": 15.17, "ci90": [15.16, 15.18]}
+    assert h["settings"]["num_chains"] == 4 and h["settings"]["num_samples"] == 500
+    assert h["seed"] == 3
+    c = h["convergence"]
+    assert c["method"] == "nuts" and c["r_hat"] == 1.02 and c["ess_bulk"] == 350.0
+    assert c["divergences"] == 2 and c["map_converged"] and not c["ok"]
+    assert len(h["warnings"]) == 2
+    md = rep.to_markdown()
+    assert "largest R̂ 1.020" in md and "converged: **no**" in md and "warning: NUTS" in md
+
+
+def test_hybrid_settings_must_be_collapsed_settings(flutter):
+    from types import SimpleNamespace
+
+    rs, _ = _blind(flutter, "h_cubic_damping", 20.0)
+    with pytest.raises(TypeError, match="CollapsedSettings"):   # before any work
+        analyse(rs, flutter, hybrid=True, hybrid_settings=SimpleNamespace(num_chains=2))
+
+
+@pytest.mark.slow
+def test_hybrid_fit_of_a_blind_run(flutter):
+    """The real fit (short chains) on cubic heave damping: Hopf point unchanged, fold moved."""
+    from bayeshopf.inference.collapsed import CollapsedSettings
+    from bayeshopf.plotting.discrepancy import plot_discrepancy_diagram
+
+    rs, _ = _blind(flutter, "h_cubic_damping", 20.0)
+    rep = analyse(rs, flutter, seed=0, hybrid=True, hybrid_settings=CollapsedSettings.fast(),
+                  kinds=("cubic_damping",), point_intervals=False)
+    h = rep.to_json()["hybrid"]
+    assert h["settings"]["num_chains"] == 2
+    assert h["convergence"]["method"] == "nuts" and h["convergence"]["r_hat"] > 0.99
+    # the simulator's Hopf point (a cubic term leaves the linearisation alone) and the
+    # fold of the system with the effect (benchmarks/discrepancy.md: 15.175 m/s)
+    assert abs(h["hopf"]["median"] - 18.2747) < 0.3, h["hopf"]
+    assert abs(h["fold"]["median"] - 15.175) < 0.3, h["fold"]
+    fig = plot_discrepancy_diagram(rep)
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert "hybrid fit, 90% band" in labels
+
+
 # ------------------------------------------------------------- example and notebook
 
 REPO = __import__("pathlib").Path(__file__).resolve().parent.parent

@@ -16,9 +16,10 @@ import pytest  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from bayeshopf.data.synthetic import demo_system  # noqa: E402
-from bayeshopf.pipeline import FitSettings, fit  # noqa: E402
+from bayeshopf.inference.collapsed import CollapsedSettings  # noqa: E402
 from bayeshopf.plotting import (  # noqa: E402
     FIGURE_NAMES,
+    FREQUENCY_FIGURE_NAMES,
     coefficient_labels,
     default_zoom,
     diagram_grid,
@@ -36,7 +37,9 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 def fitted():
     """The fast demo fit with its recordings, truth, diagram and predictive check."""
     rs, truth = demo_system(seed=0, fast=True)
-    f = fit(rs, "subcritical", seed=0, settings=FitSettings.fast(), progress=False)
+    from bayeshopf.posterior import fit_hybrid
+
+    f = fit_hybrid(rs, "subcritical", seed=0, settings=CollapsedSettings.fast(), progress=False)
     return dict(fit=f, rs=rs, truth=truth, diagram=f.diagram(diagram_grid(f)), ppc=f.ppc())
 
 
@@ -200,8 +203,7 @@ def test_plot_bifurcation_zoom_inset(fitted) -> None:
 
 def test_plot_phase_portraits(fitted, tmp_path) -> None:
     f, rs, truth = fitted["fit"], fitted["rs"], fitted["truth"]
-    fig = plot_phase_portraits(f.samples, f.spec, rs, n_orbits=12, max_points=150,
-                               truth=truth.orbit)
+    fig = plot_phase_portraits(f, rs, n_orbits=12, max_points=150, truth=truth.orbit)
     assert len(fig.axes) == len(rs)
     assert len(fig.legends) == 1
     for ax, rec in zip(fig.axes, rs, strict=True):
@@ -233,7 +235,8 @@ def test_plot_ppc(fitted, tmp_path) -> None:
     assert im.get_clim() == (-3.0, 3.0)
     assert np.nanmax(np.abs(im.get_array())) <= 3.0
     ticks = [t.get_text() for t in ax_b.get_xticklabels()]
-    assert ticks == coefficient_labels(ppc.coeff_z.shape[1])
+    half = coefficient_labels(ppc.coeff_z.shape[1] // 2)
+    assert ticks == [f"z1:{k}" for k in half] + [f"z2:{k}" for k in half]
     assert [t.get_text() for t in ax_b.get_yticklabels()] == list(ppc.names)
     _assert_png(save_figure(fig, tmp_path / "ppc.png"))
 
@@ -241,10 +244,11 @@ def test_plot_ppc(fitted, tmp_path) -> None:
 def test_plot_all(fitted, tmp_path) -> None:
     out = tmp_path / "figures"
     paths = plot_all(fitted["fit"], fitted["rs"], out, truth=fitted["truth"], dpi=80)
-    assert [p.name for p in paths] == list(FIGURE_NAMES)
+    names = list(FIGURE_NAMES) + list(FREQUENCY_FIGURE_NAMES)
+    assert [p.name for p in paths] == names
     for p in paths:
         _assert_png(p, min_bytes=10_000)
-    assert sorted(os.listdir(out)) == sorted(FIGURE_NAMES)  # no temporary files
+    assert sorted(os.listdir(out)) == sorted(names)  # no temporary files
 
 
 def test_plotting_is_pure(fitted, tmp_path) -> None:
@@ -256,7 +260,7 @@ def test_plotting_is_pure(fitted, tmp_path) -> None:
     figs_before = plt.get_fignums()
 
     plot_bifurcation(d, ppc, truth=truth.amplitude)
-    plot_phase_portraits(f.samples, f.spec, rs, n_orbits=5, truth=truth.orbit)
+    plot_phase_portraits(f, rs, n_orbits=5, truth=truth.orbit)
     plot_ppc(ppc)
 
     after = _snapshot(dict(samples=f.samples, diagram=d, ppc=ppc,

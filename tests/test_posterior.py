@@ -116,3 +116,23 @@ def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_
     report.save_hybrid(post, tmp_path / "fit")
     saved = report.load_fit(tmp_path / "fit").predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([saved.lo, saved.median, saved.hi], on_b, rtol=1e-9)
+
+
+def test_fit_auto_compares_both_normal_forms_by_exact_conditional_loo(planted):
+    """Both models fitted to the same features; the ELPD alone prefers the subcritical one.
+
+    The planted set holds unstable CBC orbits that the supercritical model (labels
+    ignored) must take for its one LCO per μ.
+    """
+    from bayeshopf.posterior import fit_auto
+
+    post, _, _ = planted
+    ll = post.log_likelihood
+    n_chains, n_draws = post.run.chains["mu0"].shape
+    assert ll.shape == (n_chains, n_draws, post.features.n_recordings)
+    assert np.isfinite(ll).all()
+    best, ev = fit_auto(post.features, seed=0, settings=SETTINGS, progress=False)
+    assert best.criticality == "subcritical" and ev["preferred"] == "subcritical"
+    assert ev["elpd_preferred"] == "subcritical" and ev["z"] > 2
+    assert set(ev["loo"]) == {"subcritical", "supercritical"}
+    assert ev["branch_labels"] == "used by the subcritical model only"

@@ -14,7 +14,7 @@ from bayeshopf.data.synthetic import (
     hopf_recordings,
 )
 from bayeshopf.errors import DataError
-from bayeshopf.features import extract_features
+from bayeshopf.features import extract_harmonics
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +96,7 @@ def test_noise_level_and_clean_orbit() -> None:
 @pytest.mark.parametrize("fast", [False, True])
 def test_features_measure_planted_amplitudes(fast: bool) -> None:
     rs, truth = demo_system(seed=2, fast=fast)
-    f = extract_features(rs)
+    f = extract_harmonics(rs)
     planted = np.array([float(truth.amplitude(r.mu, r.branch)) for r in rs])
     np.testing.assert_allclose(f.amplitude, planted, rtol=0.02)
     freq = np.array([float(truth.frequency_hz(r.mu, r.branch)) for r in rs])
@@ -110,7 +110,7 @@ def test_supercritical_set() -> None:
     rs = hopf_recordings(criticality="supercritical", duration=4.0, fs=100.0, seed=1)
     assert len(rs) == 4 and not rs.is_unstable.any() and np.all(rs.mus > 18.0)
     truth = PlantedHopf(a2=-3.4)
-    f = extract_features(rs)
+    f = extract_harmonics(rs)
     planted = truth.amplitude(rs.mus)
     np.testing.assert_allclose(f.amplitude, planted, rtol=0.02)
 

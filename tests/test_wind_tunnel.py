@@ -3,7 +3,7 @@
 One fit of the collapsed core at its default settings (seed 0): the call a user
 makes. The bars are issue 19's: every amplitude and frequency inside its 90%
 predictive band, every orbit within 5% (or twice its segment spread), and NUTS
-converged. The legacy core's rig fit (``fit_auto``) is checked in the slow
+converged. The criticality comparison (``fit_auto``) is checked in the slow
 ``test_wind_tunnel_validation``.
 """
 

@@ -29,22 +29,12 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fast", action="store_true",
                    help="short optimisation runs (smoke tests, CI); intervals less converged")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
-    p.add_argument("--speed", action="store_true",
-                   help="also fit the oscillation speed Ω to the time series (speed.npz); "
-                   "'bayeshopf predict' then reports the frequency")
     p.add_argument("--nuts-check", action="store_true",
-                   help="also run 4 NUTS chains from the MAP point and report whether they "
-                   "agree with each other and with the SVI bands (summary.json 'nuts_check'); "
-                   "with --fast: 2 chains of 30 + 30 steps, a smoke test only")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--core", choices=("collapsed", "legacy"), default="collapsed",
-                   help="inference core: 'collapsed' (default: the map integrated out "
-                   "exactly, NUTS on the normal form and hyperparameters) or 'legacy' "
-                   "(R(θ) features, MAP and SVI over every weight; needed by --speed, "
-                   "--criticality auto and --exact-loo)")
+                   help="with --inference svi: also run NUTS on the same model and report "
+                   "whether SVI's 90%% intervals match NUTS's (summary.json 'nuts_check')")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
-                   help="posterior of the collapsed core: NUTS (default) or SVI with a "
-                   "full-rank Gaussian guide")
+                   help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -100,12 +90,6 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _settings(args):
-    from bayeshopf.pipeline import FitSettings
-
-    return FitSettings.fast() if args.fast else FitSettings()
-
-
 def _print_table(summary: dict, truth: dict | None = None) -> None:
     u, au = summary["mu_units"], summary["amplitude_units"]
     curved = summary.get("unfolding") == "curved"
@@ -153,7 +137,7 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
 
 
 def _print_diagnostics(summary: dict) -> None:
-    """Convergence line and one warning line per failed check (collapsed core)."""
+    """Convergence line and one warning line per failed check."""
     diag = summary.get("diagnostics")
     if not diag:
         return
@@ -176,27 +160,15 @@ def _print_nuts_check(summary: dict) -> None:
     chk = summary.get("nuts_check")
     if chk is None:
         return
-    if "sites" in chk:  # collapsed core: SVI against NUTS on the same model
-        for k, v in chk["sites"].items():
-            lo, hi = v["reference"]
-            print(f"NUTS check {k}: NUTS [{lo:.4g}, {hi:.4g}], SVI [{v['other'][0]:.4g}, "
-                  f"{v['other'][1]:.4g}]: ends differ by {100 * v['end_gap_fraction']:.0f}% of "
-                  f"NUTS's width ({'agree' if v['agree'] else 'DISAGREE'})")
-        return
-    med = [c["median"] for c in chk["chains"]["mu0"]]
-    lo, hi = summary["mu0"]["ci90"]
-    u = summary["mu_units"]
-    verdict = ("the chains agree (R̂ {r:.3f})" if chk["mixed"] else
-               "the chains did NOT mix (R̂ {r:.2f}): the posterior has several modes and the "
-               "bands above may be too narrow")
-    print(f"\nNUTS check, {len(med)} chains from the MAP: "
-          + verdict.format(r=chk["max_rhat"])
-          + f"; chain medians of mu0 {min(med):.4g}..{max(med):.4g} {u}, "
-          f"SVI 90% band [{lo:.4g}, {hi:.4g}] {u}")
+    for k, v in chk["sites"].items():
+        lo, hi = v["reference"]
+        print(f"NUTS check {k}: NUTS [{lo:.4g}, {hi:.4g}], SVI [{v['other'][0]:.4g}, "
+              f"{v['other'][1]:.4g}]: ends differ by {100 * v['end_gap_fraction']:.0f}% of "
+              f"NUTS's width ({'agree' if v['agree'] else 'DISAGREE'})")
 
 
 def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
-    """``fit``/``demo`` on the collapsed core (:func:`bayeshopf.posterior.fit_hybrid`)."""
+    """``fit``/``demo``: :func:`~bayeshopf.posterior.fit_hybrid` (or ``fit_auto``), saved."""
     from dataclasses import replace
 
     from bayeshopf import report
@@ -204,19 +176,23 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
 
-    for flag, used in (("--speed", getattr(args, "speed", False)),
-                       ("--criticality auto", criticality == "auto"),
-                       ("--exact-loo", getattr(args, "exact_loo", False))):
-        if used:
-            raise FitError(f"{flag} runs on the legacy core; expected --core legacy with it, "
-                           "got --core collapsed")
+    if getattr(args, "nuts_check", False) and args.inference != "svi":
+        raise FitError("--nuts-check compares SVI with NUTS and needs --inference svi; got "
+                       "--inference nuts (the default), whose R̂ and ESS are reported anyway")
     report.check_output_folder(out, args.force)
     progress = not args.quiet
     t0 = time.perf_counter()
     settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
     settings = replace(settings, inference=args.inference)
-    post = fit_hybrid(rs, criticality, seed=args.seed, settings=settings, progress=progress)
-    if getattr(args, "nuts_check", False) and args.inference == "svi":
+    if criticality == "auto":
+        from bayeshopf.posterior import fit_auto
+
+        post, evidence = fit_auto(rs, seed=args.seed, settings=settings, progress=progress,
+                                  exact_loo=getattr(args, "exact_loo", False))
+        extra = {**(extra or {}), "criticality_evidence": evidence}
+    else:
+        post = fit_hybrid(rs, criticality, seed=args.seed, settings=settings, progress=progress)
+    if getattr(args, "nuts_check", False):
         from bayeshopf.inference.collapsed import compare_with_nuts
 
         extra = {**(extra or {}), "nuts_check": compare_with_nuts(post, seed=args.seed,
@@ -236,56 +212,11 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     return summary
 
 
-def _run_fit(rs, criticality, args, out, truth=None, extra=None):
-    if getattr(args, "core", "collapsed") == "collapsed":
-        return _run_hybrid(rs, criticality, args, out, truth, extra)
-    from bayeshopf import report
-    from bayeshopf.pipeline import fit, fit_auto, with_timings
-
-    report.check_output_folder(out, args.force)
-    progress = not args.quiet
-    t0 = time.perf_counter()
-    if criticality == "auto":
-        result, evidence = fit_auto(rs, seed=args.seed, settings=_settings(args),
-                                    progress=progress,
-                                    exact_loo=getattr(args, "exact_loo", False))
-        extra = {**(extra or {}), "criticality_evidence": evidence}
-    else:
-        result = fit(rs, criticality, seed=args.seed, settings=_settings(args), progress=progress)
-    if getattr(args, "nuts_check", False):
-        from bayeshopf.inference.nuts import nuts_check
-
-        short = (dict(num_chains=2, num_warmup=30, num_samples=30, max_tree_depth=6)
-                 if args.fast else {})
-        check = nuts_check(result, seed=args.seed, progress=progress, **short)
-        extra = {**(extra or {}), "nuts_check": check.to_json()}
-    t1 = time.perf_counter()
-    ppc = result.ppc()
-    result = with_timings(result, predictive=time.perf_counter() - t1)
-
-    figures = None
-    if not args.no_figures:
-        from bayeshopf.plotting import plot_all
-
-        def figures(folder):
-            return plot_all(result, rs, folder, truth=truth, zoom=truth is not None)
-
-    report.save_fit(result, out, force=args.force, figures=figures, ppc=ppc, extra_summary=extra)
-    if getattr(args, "speed", False):
-        from bayeshopf.inference.speed import SpeedSettings, fit_speed, save_speed
-
-        st = SpeedSettings(adam_steps=150, lbfgs_steps=30, svi_steps=300) if args.fast else None
-        save_speed(fit_speed(result, rs, seed=args.seed, settings=st, progress=progress), out)
-    summary = json.loads((Path(out) / report.SUMMARY).read_text())
-    summary["total_s"] = time.perf_counter() - t0
-    return summary
-
-
 def cmd_demo(args) -> int:
     """``bayeshopf demo``: the 3-DOF aerofoil of the paper's Section 4.2, fitted blind.
 
     The recordings come from :func:`bayeshopf.simulators.truth.flutter_experiment`
-    (``--fast``: shorter records and :meth:`FitSettings.fast`); the truth printed
+    (``--fast``: shorter records and :meth:`CollapsedSettings.fast`); the truth printed
     next to the intervals is the simulator's: the Hopf point from the Jacobian,
     the fold from the continuation of the periodic orbits, and
     ``a2 = 2√(μ0 − μ_SN)``, the normal form's a2 with that fold.
@@ -293,7 +224,7 @@ def cmd_demo(args) -> int:
     from bayeshopf.simulators.truth import flutter_experiment
 
     rs, truth = flutter_experiment(seed=args.seed, fast=args.fast)
-    summary = _run_fit(rs, "subcritical", args, args.out, truth=truth,
+    summary = _run_hybrid(rs, "subcritical", args, args.out, truth=truth,
                        extra={"truth": truth.to_dict()})
     print(f"bayeshopf demo: {len(rs)} simulated recordings ({int(rs.is_unstable.sum())} "
           "unstable, by control-based continuation) of the 3-DOF aeroelastic aerofoil "
@@ -316,7 +247,7 @@ def cmd_fit(args) -> int:
         raise FitError(f"--exact-loo compares the two normal forms and needs --criticality "
                        f"auto; got --criticality {args.criticality}")
     rs = load_recordings(args.data, planar=tuple(args.planar) if args.planar else None)
-    summary = _run_fit(rs, crit, args, args.out)
+    summary = _run_hybrid(rs, crit, args, args.out)
     _print_table(summary)
     print(f"\nwrote {args.out}/summary.json, posterior.nc, model.json and figures/ "
           f"in {summary['total_s']:.0f} s")
@@ -330,7 +261,7 @@ def cmd_predict(args) -> int:
     saved = load_fit(args.fit_dir)
     iv = saved.predict(args.mu, args.branch, predictive=args.predictive)
     p = saved.p_exists(args.mu, args.branch)
-    freq = _frequency(saved, args.mu, args.branch, args.predictive)
+    freq = saved.frequency(args.mu, args.branch, args.predictive)
     if args.json:
         out = {"mu": args.mu, "branch": args.branch, "amplitude": iv.to_json(),
                "p_exists": p, "units": saved.summary.get("amplitude_units", "")}
@@ -345,24 +276,6 @@ def cmd_predict(args) -> int:
         if freq is not None:
             print(f"frequency {freq.median:.4g} Hz, 90% interval [{freq.lo:.4g}, {freq.hi:.4g}] Hz")
     return 0
-
-
-def _frequency(saved, mu: float, branch: str, predictive: bool = False):
-    """Frequency interval (Hz) at μ when the fit folder has a frequency model, else ``None``."""
-    import numpy as np
-
-    from bayeshopf.diagnostics.summaries import interval
-    from bayeshopf.inference.speed import frequency_draws, load_speed_draws
-
-    if hasattr(saved, "frequency"):          # the collapsed core: Ω(r, μ) in the model
-        return saved.frequency(mu, branch, predictive)
-    loaded = load_speed_draws(saved.folder)
-    if loaded is None:
-        return None
-    spec, speed, maps = loaded
-    f = frequency_draws(spec, saved.spec, speed, maps, [mu], branch, predictive=predictive)[:, 0]
-    f = f[np.isfinite(f)]
-    return interval(f) if f.size else None
 
 
 COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict, "simulate": _simulate.run,

@@ -246,8 +246,8 @@ class PlantedHopf:
     def amplitude(self, mu, branch: str = "stable") -> np.ndarray:
         """Planted peak-to-peak of z1 (heave, m) of the LCO at ``mu``; nan where none.
 
-        This is the quantity :func:`bayeshopf.features.extract_features` measures
-        as ``OrbitFeatures.amplitude``.
+        This is the quantity :func:`bayeshopf.features.extract_harmonics` measures
+        as ``HarmonicFeatures.amplitude``.
         """
         z1 = self.orbit(mu, branch, _N_ORBIT)[..., 0]
         return np.max(z1, axis=-1) - np.min(z1, axis=-1)

@@ -2,8 +2,6 @@
 
 from bayeshopf.diagnostics.bifurcation import BifurcationDiagram as BifurcationDiagram
 from bayeshopf.diagnostics.bifurcation import BranchBand as BranchBand
-from bayeshopf.diagnostics.bifurcation import bifurcation_diagram as bifurcation_diagram
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck as PosteriorPredictiveCheck
-from bayeshopf.diagnostics.ppc import posterior_predictive_check as posterior_predictive_check
 from bayeshopf.diagnostics.summaries import Interval as Interval
 from bayeshopf.diagnostics.summaries import interval as interval

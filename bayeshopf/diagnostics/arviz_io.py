@@ -18,37 +18,6 @@ with warnings.catch_warnings():  # the 0.2x series announces its 1.x refactor on
     import arviz as az
 
 
-def to_inference_data(
-    samples: dict,
-    *,
-    observed: dict | None = None,
-    predictive: dict | None = None,
-    constant: dict | None = None,
-    attrs: dict | None = None,
-) -> az.InferenceData:
-    """InferenceData with one chain from flat posterior draws.
-
-    Args:
-        samples: Site name -> draws with leading axis ``n_draws``.
-        observed: Observed data (no draw axis).
-        predictive: Posterior predictive draws, leading axis ``n_draws``.
-        constant: Constant data (covariates such as μ).
-        attrs: Attributes stored on the posterior group.
-    """
-
-    def chain(d):
-        return {k: np.asarray(v)[None] for k, v in (d or {}).items()}
-
-    idata = az.from_dict(
-        posterior=chain(samples),
-        posterior_predictive=chain(predictive) or None,
-        observed_data={k: np.asarray(v) for k, v in (observed or {}).items()} or None,
-        constant_data={k: np.asarray(v) for k, v in (constant or {}).items()} or None,
-        attrs=attrs or {},
-    )
-    return idata
-
-
 def write_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:
     """Write ``idata`` to ``path`` atomically (a temporary file, then a rename)."""
     path = Path(path)
@@ -209,11 +178,18 @@ def rhat_ess(chains: dict) -> dict:
 
 
 def chains_to_inference_data(posterior: dict, *, observed: dict | None = None,
-                             constant: dict | None = None,
+                             constant: dict | None = None, log_likelihood: dict | None = None,
+                             coords: dict | None = None, dims: dict | None = None,
                              attrs: dict | None = None) -> az.InferenceData:
-    """InferenceData from draws by chain ``(n_chains, n_draws, ...)``."""
+    """InferenceData from draws by chain ``(n_chains, n_draws, ...)``.
+
+    ``log_likelihood`` holds pointwise log-likelihoods by chain and draw;
+    ``coords`` and ``dims`` name the axes (ArviZ's ``from_dict``).
+    """
     return az.from_dict(
         posterior={k: np.asarray(v) for k, v in posterior.items()},
+        log_likelihood={k: np.asarray(v) for k, v in (log_likelihood or {}).items()} or None,
+        coords=coords, dims=dims,
         observed_data={k: np.asarray(v) for k, v in (observed or {}).items()} or None,
         constant_data={k: np.asarray(v) for k, v in (constant or {}).items()} or None,
         attrs=attrs or {},

@@ -1,8 +1,7 @@
 """Frequency and time-series bands: posterior summaries over μ and over time (immutable).
 
-Shared by both inference cores: :class:`~bayeshopf.posterior.HybridPosterior`
-(``frequency_band``, ``time_series_bands``) and the legacy speed stage
-(:mod:`bayeshopf.inference.speed`); drawn by :mod:`bayeshopf.plotting.timeseries`.
+Made by :class:`~bayeshopf.posterior.HybridPosterior` (``frequency_band``,
+``time_series_bands``); drawn by :mod:`bayeshopf.plotting.timeseries`.
 """
 
 from __future__ import annotations

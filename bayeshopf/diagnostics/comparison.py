@@ -4,73 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from scipy.stats import norm
 
 from bayeshopf.diagnostics import arviz_io
-from bayeshopf.features.orbits import OrbitFeatures
-from bayeshopf.model import hybrid
-from bayeshopf.model.hybrid import ModelSpec
-from bayeshopf.model.probabilistic import harmonic_scatter
 
 
-def pointwise_log_likelihood(samples: dict, features: OrbitFeatures) -> np.ndarray:
-    """``log p(Φ(R_i) | θ_s)`` per draw s and recording i, shape ``(n_draws, n_rec)``.
+def pooled_log_likelihood(post) -> np.ndarray:
+    """A fit's pointwise log-likelihood with the chains pooled, ``(n_draws, n_rec)``.
 
-    The likelihood of the model: ``Φ(R_i) ~ N(Φ(R̂_i), √(σ_k² + s_i²))``, summed
-    over the coefficients of recording i.
+    ``post.log_likelihood`` is ``log p(y_i | y_{−i}, θ)`` per chain and draw
+    (:attr:`bayeshopf.posterior.HybridPosterior.log_likelihood`); ``nan`` (a
+    branch that does not exist in a draw) counts as ``−inf``.
     """
-    return _coeff_log_density(samples["sigma"][:, None], np.asarray(samples["coeffs_hat"]),
-                              features.coeffs, features.coeffs_sd)
-
-
-def _coeff_log_density(sigma, pred, coeffs, coeffs_sd) -> np.ndarray:
-    """``Σ_c log N(Φ_c; Φ̂_c, √(σ_k(c)² + s_c²))`` over the last axis (the likelihood).
-
-    ``sigma`` holds one scatter per harmonic order and broadcasts against ``pred``.
-    """
-    per_coeff = np.asarray(harmonic_scatter(np.asarray(sigma)))
-    scale = np.sqrt(per_coeff**2 + np.asarray(coeffs_sd) ** 2)
-    return norm.logpdf(np.asarray(coeffs), loc=pred, scale=scale).sum(axis=-1)
-
-
-#: Draws per batch of the held-out prediction (see held_out_log_likelihood).
-_HELD_OUT_BATCH = 50
-
-
-def held_out_log_likelihood(samples: dict, spec: ModelSpec, features: OrbitFeatures,
-                            i: int, sign: float) -> np.ndarray:
-    """``log p(Φ(R_i) | θ_s)`` for draws θ_s of a fit that did not see recording i.
-
-    The prediction ``Φ(R̂_i)`` at μ_i on branch ``sign`` is computed for every
-    draw (the fit's own ``coeffs_hat`` cover only its training recordings);
-    ``features`` must be in the frame of the fit. ``-inf`` where the branch does
-    not exist at μ_i.
-
-    Returns:
-        Array ``(n_draws,)``.
-    """
-    keys = hybrid.param_site_names(spec, samples)
-    sites = {k: jnp.asarray(samples[k]) for k in keys}
-
-    def build():
-        # lax.map, not vmap: on the rig (jaxlib 0.10.2, CPU), the vmapped QR
-        # least squares of 400 draws compiled to a program whose result never
-        # materialised (block_until_ready idle at 0% CPU; the XLA CPU hang family
-        # of jax-ml/jax#24219 and #25861); batches of 50 run in under a second
-        def f(sites, mu, sign):
-            return jax.lax.map(lambda s: hybrid.predicted_coeffs(
-                hybrid.params_from_sites(s, spec), mu, sign, spec), sites,
-                batch_size=_HELD_OUT_BATCH)
-
-        return f
-
-    pred = np.asarray(hybrid.jit_for_spec(spec, "held_out_coeffs", build)(
-        sites, jnp.asarray(features.mu[i], dtype=float), jnp.asarray(sign, dtype=float)))
-    lp = _coeff_log_density(samples["sigma"], pred, features.coeffs[i], features.coeffs_sd[i])
-    return np.where(np.isfinite(lp), lp, -np.inf)
+    ll = np.asarray(post.log_likelihood)
+    ll = ll.reshape((-1, ll.shape[-1]))
+    return np.where(np.isfinite(ll), ll, -np.inf)
 
 
 #: Recordings closer in μ than this fraction of the μ span count as one airspeed.
@@ -85,7 +33,7 @@ def same_mu_tolerance(mu, same_mu_fraction: float = SAME_MU_FRACTION) -> float:
     return same_mu_fraction * max(float(np.ptp(np.asarray(mu, dtype=float))), 1e-12)
 
 
-def coexisting_orbits(features: OrbitFeatures,
+def coexisting_orbits(features,
                       same_mu_fraction: float = SAME_MU_FRACTION) -> list[dict]:
     """Pairs of recordings at one μ, and how far apart their amplitudes are.
 
@@ -130,8 +78,9 @@ def compare_criticality(fits: dict, refit: Callable | None = None,
     """LOO comparison of fits keyed by criticality: PSIS, or exact where PSIS fails.
 
     Args:
-        fits: Criticality → :class:`~bayeshopf.pipeline.HopfFit` on the same features.
-        refit: Optional ``(criticality, i) ↦ log p(Φ(R_i) | θ_s^(−i))`` over the
+        fits: Criticality → :class:`~bayeshopf.posterior.HybridPosterior` on the
+            same features (anything with ``log_likelihood`` and ``features``).
+        refit: Optional ``(criticality, i) ↦ log p(y_i | y_{−i}, θ_s^(−i))`` over the
             draws of a refit without recording i. When given, every recording
             whose Pareto k exceeds ``k_thresh`` in a model is refitted there
             (ArviZ ``reloo``) and its exact leave-one-out density replaces PSIS's.
@@ -150,7 +99,7 @@ def compare_criticality(fits: dict, refit: Callable | None = None,
         ``"subcritical"`` (``decided_by`` says which rule chose), and the
         statement names the pair. ``elpd_preferred`` is the ELPD's choice.
     """
-    lls = {name: pointwise_log_likelihood(f.samples, f.features) for name, f in fits.items()}
+    lls = {name: pooled_log_likelihood(f) for name, f in fits.items()}
     held_out = None if refit is None else {
         name: (lambda i, name=name: refit(name, i)) for name in fits}
     table, loo = arviz_io.compare_with_loo(lls, held_out, k_thresh)

@@ -88,7 +88,7 @@ def pair_invariants(features, *, same_mu_fraction: float = SAME_MU_FRACTION, n_d
     """The invariant ``x`` at every unstable recording with stable ones at or beside its μ.
 
     Args:
-        features: :class:`~bayeshopf.features.orbits.OrbitFeatures` (``mu``,
+        features: :class:`~bayeshopf.features.harmonics.HarmonicFeatures` (``mu``,
             ``unstable``, ``amplitude``, ``amplitude_sd`` and ``names`` are used).
         same_mu_fraction: A stable recording closer in μ than this fraction of
             the μ span is taken as at the same μ (as in

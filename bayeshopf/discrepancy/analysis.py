@@ -7,7 +7,10 @@ r"""The whole analysis: compare, locate, name, model, show the improvement, give
    per channel, :mod:`~bayeshopf.discrepancy.features`) against those of the
    simulator's periodic orbit at the recording's μ on its branch, with sensor
    offsets marginalised; the simulator's Hopf point and fold; optionally the
-   Bayesian hybrid fit of the recordings (:func:`bayeshopf.pipeline.fit`).
+   Bayesian hybrid fit of the recordings on the collapsed core
+   (:func:`bayeshopf.posterior.fit_hybrid`, subcritical, default
+   :class:`~bayeshopf.inference.collapsed.CollapsedSettings` unless others are
+   given), reported with its settings and convergence (:func:`hybrid_summary`).
 2. **Locate** (:mod:`~bayeshopf.discrepancy.locate`).
 3. **Name.** The posterior of every library term's coefficient and the
    posterior probability of each single-term model
@@ -50,7 +53,7 @@ from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.registry import get_system
 
-__all__ = ["DiscrepancyReport", "TIE_FACTOR", "analyse"]
+__all__ = ["DiscrepancyReport", "TIE_FACTOR", "analyse", "hybrid_summary"]
 
 #: Two terms are reported together when their probabilities are within this factor.
 TIE_FACTOR = 5.0
@@ -165,12 +168,16 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
         recordings: Stable and unstable LCO recordings (μ and branch labelled).
         system: The simulator, or its name for :func:`~bayeshopf.simulators.get_system`.
         seed: Seed of the posterior draws (and of the hybrid fit).
-        hybrid: Also fit the Bayesian hybrid model to the recordings and report
-            its Hopf and fold intervals (minutes).
+        hybrid: Also fit the Bayesian hybrid model to the recordings
+            (:func:`bayeshopf.posterior.fit_hybrid`, subcritical) and report its
+            Hopf and fold intervals, settings and convergence under ``"hybrid"``
+            (:func:`hybrid_summary`; a minute or two at default settings).
         progress: Show progress bars.
         K: Harmonics per channel.
         kinds: Kinds of term in the library.
-        hybrid_settings: :class:`~bayeshopf.pipeline.FitSettings` of the hybrid fit.
+        hybrid_settings: :class:`~bayeshopf.inference.collapsed.CollapsedSettings`
+            of the hybrid fit; default ``CollapsedSettings()`` (the documented
+            defaults, full-length chains).
         point_intervals: Also continue the simulator with the term at the ends of
             its coefficient's 90% interval, for 90% intervals of its Hopf point
             and fold (two more continuations; the points are monotone in one
@@ -179,8 +186,18 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     Raises:
         BayesHopfError: Bad recordings, an unknown simulator, or one without
             extra-force input.
+        TypeError: ``hybrid_settings`` that are not a ``CollapsedSettings``.
     """
     from tqdm.auto import tqdm
+
+    if hybrid:
+        from bayeshopf.inference.collapsed import CollapsedSettings
+
+        if hybrid_settings is None:
+            hybrid_settings = CollapsedSettings()
+        elif not isinstance(hybrid_settings, CollapsedSettings):
+            raise TypeError("hybrid_settings must be a bayeshopf.inference.collapsed."
+                            f"CollapsedSettings; got {type(hybrid_settings).__name__}")
 
     from bayeshopf.diagnostics import arviz_io
 
@@ -317,16 +334,11 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     hyb = None
     hybrid_fit = None
     if hybrid:
-        from bayeshopf.pipeline import FitSettings, fit
+        from bayeshopf.posterior import fit_hybrid
 
-        hybrid_fit = fit(recordings, "subcritical", seed=seed,
-                         settings=hybrid_settings or FitSettings.fast(), progress=progress)
-        hyb = {}
-        for k in ("mu0", "mu_fold"):
-            iv = hybrid_fit.interval(k)
-            hyb["hopf" if k == "mu0" else "fold"] = (
-                None if iv is None else {"median": float(iv.median), "ci90": [float(iv.lo),
-                                                                               float(iv.hi)]})
+        hybrid_fit = fit_hybrid(recordings, "subcritical", seed=seed, settings=hybrid_settings,
+                                progress=progress)
+        hyb = hybrid_summary(hybrid_fit)
     cands = [{"name": "none", "probability": p_none, "coefficient": None}]
     for f, p in zip(fits, probs, strict=True):
         cands.append({"name": f.term.name, "probability": float(p),
@@ -353,6 +365,82 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     extras = {"features": mf, "fitter": fitter, "base": base, "before": before_pts,
               "after": after_pts, "hybrid": hybrid_fit, "e0": e0, "probabilities": probs}
     return DiscrepancyReport(data=data, system=system, fits=tuple(fits), extras=extras)
+
+
+def _interval(iv) -> dict | None:
+    return None if iv is None else {"median": float(iv.median),
+                                    "ci90": [float(iv.lo), float(iv.hi)]}
+
+
+def hybrid_summary(post) -> dict:
+    """The report's ``"hybrid"`` entry for a :class:`~bayeshopf.posterior.HybridPosterior`.
+
+    * ``hopf``, ``fold``: median and 90% interval of ``mu0`` and ``mu_fold``
+      (``None`` where the model has no such site);
+    * ``settings``: the :class:`~bayeshopf.inference.collapsed.CollapsedSettings`
+      used, as a dict; ``seed``;
+    * ``convergence``: compact form of ``post.diagnostics``: the method, the MAP's
+      gradient norm and whether it converged; for NUTS the chains, divergences,
+      the largest R̂ and smallest bulk ESS over the checked sites with the
+      thresholds, and R̂/ESS per site; for SVI whether the ELBO reached a
+      plateau; ``ok`` when every check passed;
+    * ``warnings``: every warning line of the diagnostics (convergence and fit);
+    * ``seconds``: wall time per stage.
+    """
+    import dataclasses
+
+    diag = post.diagnostics or {}
+    mp = diag.get("map", {})
+    po = diag.get("posterior", {})
+    conv: dict[str, Any] = {"method": po.get("method"),
+                            "map_grad_norm": mp.get("grad_norm"),
+                            "map_converged": bool(mp.get("converged", False))}
+    ok = conv["map_converged"]
+    if po.get("method") == "nuts":
+        sites = po.get("sites", {})
+        r = [v["r_hat"] for v in sites.values()]
+        e = [v["ess_bulk"] for v in sites.values()]
+        conv.update(chains=po.get("chains"), divergences=int(po.get("divergences", 0)),
+                    r_hat=max(r) if r else None, ess_bulk=min(e) if e else None,
+                    r_hat_limit=po.get("r_hat_max"), ess_limit=po.get("ess_min"),
+                    sites={k: {"r_hat": float(v["r_hat"]), "ess_bulk": float(v["ess_bulk"])}
+                           for k, v in sites.items()})
+        # a single chain has no R̂: not checked, so not passed
+        ok = ok and bool(sites) and all(v["ok"] for v in sites.values()) \
+            and conv["divergences"] == 0
+    elif po.get("method") == "svi":
+        pl = po.get("elbo_plateau", {})
+        conv.update(elbo_plateau=bool(pl.get("plateau", False)), steps=po.get("steps"))
+        ok = ok and conv["elbo_plateau"]
+    conv["ok"] = bool(ok)
+    return {"hopf": _interval(post.interval("mu0")), "fold": _interval(post.interval("mu_fold")),
+            "settings": dataclasses.asdict(post.settings), "seed": int(post.seed),
+            "convergence": conv, "warnings": list(diag.get("warnings", [])),
+            "seconds": {k: float(v) for k, v in post.timings.items()}}
+
+
+def _hybrid_markdown(h: dict) -> list[str]:
+    lines = ["", "## Bayesian hybrid fit of the recordings", ""]
+    for k in ("hopf", "fold"):
+        if h.get(k):
+            lines.append(f"* {k}: {h[k]['median']:.3f} (90% {h[k]['ci90'][0]:.3f} – "
+                         f"{h[k]['ci90'][1]:.3f})")
+    s, c = h.get("settings") or {}, h.get("convergence") or {}
+    if c.get("method") == "nuts":
+        lines.append(f"* NUTS, {s.get('num_chains')} chains × {s.get('num_samples')} draws "
+                     f"({s.get('num_warmup')} warm-up): largest R̂ {c['r_hat']:.3f} "
+                     f"(limit {c['r_hat_limit']}), smallest bulk ESS {c['ess_bulk']:.0f} "
+                     f"(limit {c['ess_limit']}), {c['divergences']} divergences"
+                     if c.get("r_hat") is not None else
+                     f"* NUTS, {s.get('num_chains')} chain(s): R̂ not computed")
+    elif c.get("method") == "svi":
+        lines.append(f"* SVI, {s.get('svi_steps')} steps: ELBO "
+                     + ("at a plateau" if c.get("elbo_plateau") else "still falling"))
+    if c:
+        lines.append(f"* converged: {'yes' if c.get('ok') else '**no**'}")
+    for w in h.get("warnings", []):
+        lines.append(f"* warning: {w}")
+    return lines
 
 
 def _markdown(d: dict) -> str:
@@ -395,12 +483,7 @@ def _markdown(d: dict) -> str:
         lines.append(f"| ELPD after − before | | {fa['elpd_difference']:.1f} ± "
                      f"{fa['elpd_difference_se']:.1f} |")
     if d.get("hybrid"):
-        h = d["hybrid"]
-        lines += ["", "## Bayesian hybrid fit of the recordings", ""]
-        for k in ("hopf", "fold"):
-            if h.get(k):
-                lines.append(f"* {k}: {h[k]['median']:.3f} (90% {h[k]['ci90'][0]:.3f} – "
-                             f"{h[k]['ci90'][1]:.3f})")
+        lines += _hybrid_markdown(d["hybrid"])
     lines += ["", "## Where the simulator disagrees (before)", "",
               "| recording | μ | branch | worst channel | amplitude error | frequency error | "
               "phase range (°) | where | phase to reference: simulated − measured (°) | "

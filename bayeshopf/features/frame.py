@@ -26,9 +26,9 @@ orbit is the level set ``(z - m_i)^T C_i^{-1} (z - m_i) = 2``),
 
 .. math::  c = \\arg\\min_z \\max_i\\,(z - m_i)^T C_i^{-1} (z - m_i),
 
-a convex problem. :func:`~bayeshopf.features.orbits.extract_features` uses it
-only when some orbit does not encircle the mean of the means, so data sets
-whose orbits all encircle it keep exactly the frame above.
+a convex problem. :func:`~bayeshopf.features.harmonics.extract_harmonics` does
+not need it (its features are time harmonics, which need no centre inside
+each orbit) and builds the frame above.
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ def release_compiled() -> None:
     """Drop every in-memory compiled program (bayeshopf's per-spec jits and JAX's caches).
 
     Each fit compiles its own closures (the potential, the SVI step, the
-    predictions of its :class:`~bayeshopf.model.hybrid.ModelSpec`), and JAX
+    predictions of its :class:`~bayeshopf.model.collapsed.CollapsedSpec`), and JAX
     keeps the compiled code mapped in memory. A process that fits many data
     sets (leave-one-out, calibration over seeds) then exhausts the kernel's
     limit on memory mappings (``vm.max_map_count``, 65530 by default): LLVM
@@ -83,15 +83,13 @@ def release_compiled() -> None:
     14th fit of 4 starts, with 23 GB of memory free).
     The collapsed core leaks the same way (its short-record calibration
     crashed at its 16th fit, after about 4,400 new mappings per fit).
-    :func:`~bayeshopf.posterior.fit_hybrid` and :func:`~bayeshopf.pipeline.fit`
-    call this first; nothing compiled for an earlier fit is reused by a later
-    one, and the persistent cache on disk is kept, so a repeated fit still loads
-    its programs instead of compiling.
+    :func:`~bayeshopf.posterior.fit_hybrid` calls this first; nothing compiled
+    for an earlier fit is reused by a later one, and the persistent cache on
+    disk is kept, so a repeated fit still loads its programs instead of compiling.
     """
     from bayeshopf import posterior
-    from bayeshopf.model import collapsed, hybrid
+    from bayeshopf.model import collapsed
 
-    hybrid.clear_spec_jits()
     collapsed.clear_jits()
     posterior.clear_orbit_jits()
     jax.clear_caches()

@@ -2,24 +2,29 @@
 
 The paper's "mapping to other coordinates": a further measured channel ``y``
 (the actuator command, the CBC target, a strain gauge...) is a function of the
-state, ``y = f(u, μ)``. Once the planar map is fitted, every measured sample is
-placed on its predicted orbit, which inverts U12 along the LCO: the sample's
-normal-form phase is that of the nearest point of the predicted orbit,
+state, ``y = f(u, μ)``. Once the planar map is fitted (the collapsed
+core, :class:`~bayeshopf.posterior.HybridPosterior`), every measured sample is
+placed on its predicted orbit, which inverts the map along the LCO: the
+sample's normal-form phase is that of the nearest point of the predicted orbit
+in the frame of the features,
 
-    φ(t) = argmin_φ ‖w(t) − U12(r(μ) [cos φ, sin φ], μ̃)‖.
+    φ(t) = argmin_φ ‖w(t) − w_θ,β(φ; μ)‖,   w_θ,β(φ; μ) = Ψ(s(μ) [cos φ, sin φ], μ̃) β
+
+(:func:`~bayeshopf.model.collapsed.orbit`, ``s = r(μ)/r_ref``), for each
+posterior draw ``(θ, β)`` of the normal form and the map.
 
 ``f`` is linear in basis functions of the state,
 
     f = β · b(u, μ̃),   b = [1, μ̃, w1, w2, μ̃ w1, μ̃ w2, w1², w1 w2, w2², w1³, w2³],
 
-where ``w = U12(u, μ̃)`` is the fitted planar position (so the basis carries the
-map's gain and its correction) and the quadratic and cubic terms allow a
+where ``w = w_θ,β(φ; μ)`` is the fitted planar position in the frame (so the
+basis carries the map's gain and its correction) and the quadratic and cubic terms allow a
 nonlinear channel. As for the map, the fit compares closed curves: ``y`` and
 each basis function are projected onto a Fourier series in φ (K harmonics) per
 recording, and ``β`` is a conjugate Bayesian linear regression of all
 recordings' coefficients (conjugate, under the reference prior), so the misfit
-σ is estimated. It is repeated for draws of the map's posterior, so the
-channel's band carries the map's uncertainty and the regression's.
+σ is estimated. It is repeated for posterior draws of ``(θ, β)``, so
+the channel's band carries the fit's uncertainty and the regression's.
 """
 
 from __future__ import annotations
@@ -31,10 +36,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.predictive import _site_arrays
 from bayeshopf.errors import FitError
-from bayeshopf.model import hybrid, normal_form
-from bayeshopf.model.hybrid import branch_signs
+from bayeshopf.model import collapsed as cm
+from bayeshopf.model import normal_form
 
 #: Phases on which the predicted orbit is searched for the nearest point.
 N_PHASE_GRID = 720
@@ -52,7 +56,7 @@ class ChannelFit:
         name: Channel name.
         units: Its unit.
         n_harmonics: Harmonics K of the channel's waveform in φ.
-        draw_index: Posterior draws of the map used, shape ``(n_draws,)``.
+        draw_index: Posterior draws ``(θ, β)`` of the fit used, shape ``(n_draws,)``.
         beta: Regression coefficients per draw, ``(n_draws, len(BASIS))``.
         sigma: Misfit scatter of a Fourier coefficient per draw, ``(n_draws,)``.
         measured_coeffs: Per-recording Fourier coefficients of the channel at a
@@ -73,16 +77,24 @@ class ChannelFit:
     measured_amplitude: np.ndarray
     phases: tuple
 
-    def waveform(self, fit_, mu: float, branch: str = "stable", *, predictive: bool = False,
+    def waveform(self, post, mu: float, branch: str = "stable", *, predictive: bool = False,
                  n_phi: int = 128, seed: int = 0) -> np.ndarray:
         """The channel along the orbit at μ, ``(n_draws, n_phi)`` on ``φ ∈ [0, 2π)``.
 
-        ``predictive=True`` adds the misfit σ to every Fourier coefficient: the
-        band a new recording's waveform falls in.
+        ``y(φ) = βᵀ b(w_θ,β(φ; μ), μ̃)`` for each draw; ``nan`` where the branch
+        does not exist in a draw. ``predictive=True`` adds the misfit σ to every
+        Fourier coefficient: the band a new recording's waveform falls in.
+
+        Args:
+            post: The :class:`~bayeshopf.posterior.HybridPosterior` the channel was fitted with.
+            mu: μ.
+            branch: ``"stable"`` or ``"unstable"``.
+            predictive: Add a new recording's misfit.
+            n_phi: Phases.
+            seed: Seed of the misfit draws.
         """
-        sign = normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
         phi = np.linspace(0.0, 2.0 * np.pi, n_phi, endpoint=False)
-        b = _basis_along_orbits(fit_, self.draw_index, mu, sign, phi)  # (d, n_phi, p)
+        b = _basis_along_orbits(post, self.draw_index, mu, _sign(branch), phi)  # (d, n_phi, p)
         y = np.einsum("dnp,dp->dn", b, self.beta)
         if predictive:
             rng = np.random.default_rng(seed)
@@ -90,7 +102,7 @@ class ChannelFit:
             y = y + eps @ _fourier(phi, self.n_harmonics).T
         return y
 
-    def amplitude(self, fit_, mu, branch: str = "stable", *, predictive: bool = False,
+    def amplitude(self, post, mu, branch: str = "stable", *, predictive: bool = False,
                   seed: int = 0) -> np.ndarray:
         """Peak-to-peak of the channel at each μ, ``(n_draws, n_mu)``.
 
@@ -98,7 +110,7 @@ class ChannelFit:
         recording per draw), so band edges are smooth curves.
         """
         mu = np.atleast_1d(np.asarray(mu, float))
-        return np.stack([np.ptp(self.waveform(fit_, m, branch, predictive=predictive,
+        return np.stack([np.ptp(self.waveform(post, m, branch, predictive=predictive,
                                               seed=seed), axis=-1)
                          for m in mu], axis=1)
 
@@ -119,42 +131,55 @@ def _basis(w, mu_t):
                      axis=-1)
 
 
-def _orbit_basis_fn(spec):
-    def build():
-        def f(sites, mu, sign, phi):
-            def one(s):
-                w = hybrid.orbit_at(hybrid.params_from_sites(s, spec), mu, sign, phi, spec)
-                return _basis(w, spec.mu_tilde(mu))
-
-            return jax.vmap(one)(sites)
-
-        return f
-
-    return hybrid.jit_for_spec(spec, "channel_basis", build)
+_FNS: dict[int, tuple] = {}
 
 
-def _basis_along_orbits(fit_, idx, mu, sign, phi) -> np.ndarray:
-    sites = {k: v[idx] for k, v in _site_arrays(fit_.samples, fit_.spec).items()}
-    f = _orbit_basis_fn(fit_.spec)
-    return np.asarray(f(sites, jnp.asarray(mu, float), jnp.asarray(sign, float),
-                        jnp.asarray(phi)))
+def _jitted(spec: cm.CollapsedSpec):
+    """``(basis along orbits, nearest phase)`` for draws ``(θ, β)``, compiled once per spec."""
+    hit = _FNS.get(id(spec))
+    if hit is not None and hit[0] is spec:
+        return hit[1]
+    phi_grid = jnp.linspace(0.0, 2.0 * jnp.pi, N_PHASE_GRID, endpoint=False)
+
+    def orbit(t, b, mu, sign, phi):
+        return cm.orbit(spec, t, b, mu, sign, phi)                  # (n_phi, 2)
+
+    def basis_along(theta, betas, mu, sign, phi):
+        return jax.lax.map(lambda a: _basis(orbit(a[0], a[1], mu, sign, phi), spec.mu_tilde(mu)),
+                           (theta, betas))
+
+    def nearest_phase(theta, betas, mu, sign, w):
+        def one(a):
+            o = orbit(a[0], a[1], mu, sign, phi_grid)
+            d2 = jnp.sum((w[:, None, :] - o[None]) ** 2, axis=-1)
+            return phi_grid[jnp.argmin(d2, axis=-1)]
+
+        # lax.map over draws: XLA's batched linear algebra is slow on CPU
+        return jax.lax.map(one, (theta, betas))
+
+    fns = (jax.jit(basis_along), jax.jit(nearest_phase))
+    if len(_FNS) > 16:
+        _FNS.clear()
+    _FNS[id(spec)] = (spec, fns)
+    return fns
 
 
-def _phase_finder(spec):
-    def build():
-        phi_grid = jnp.linspace(0.0, 2.0 * jnp.pi, N_PHASE_GRID, endpoint=False)
+def _draws(post, idx) -> tuple[dict, jnp.ndarray]:
+    theta = {k: jnp.asarray(np.asarray(v)[idx]) for k, v in post.theta.items()}
+    return theta, jnp.asarray(post.run.betas[idx])
 
-        def f(sites, mu, sign, w):
-            def one(s):
-                orbit = hybrid.orbit_at(hybrid.params_from_sites(s, spec), mu, sign, phi_grid, spec)
-                d2 = jnp.sum((w[:, None, :] - orbit[None]) ** 2, axis=-1)
-                return phi_grid[jnp.argmin(d2, axis=-1)]
 
-            return jax.lax.map(one, sites)
+def _sign(branch: str) -> float:
+    if branch not in ("stable", "unstable"):
+        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    return normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
 
-        return f
 
-    return hybrid.jit_for_spec(spec, "phase_finder", build)
+def _basis_along_orbits(post, idx, mu, sign, phi) -> np.ndarray:
+    """``b`` along each draw's predicted orbit at μ, ``(n_draws, n_phi, len(BASIS))``."""
+    theta, betas = _draws(post, idx)
+    return np.asarray(_jitted(post.spec)[0](theta, betas, jnp.asarray(mu, float),
+                                            jnp.asarray(sign, float), jnp.asarray(phi)))
 
 
 def _regression_draw(x, y, rng):
@@ -179,7 +204,7 @@ def _regression_draw(x, y, rng):
 
 
 def fit_channel(
-    fit_,
+    post,
     recordings: RecordingSet,
     channel: str,
     *,
@@ -191,11 +216,11 @@ def fit_channel(
     """Regress a further channel on the normal-form state of a fitted model.
 
     Args:
-        fit_: A :class:`~bayeshopf.pipeline.HopfFit` of ``recordings``.
+        post: A :class:`~bayeshopf.posterior.HybridPosterior` of ``recordings``.
         recordings: The recordings the model was fitted to (same order).
         channel: Name of the channel to regress (not one of the planar pair).
         n_harmonics: Harmonics K of the channel's waveform in φ.
-        n_draws: Posterior draws of the map used.
+        n_draws: Posterior draws ``(θ, β)`` used.
         max_samples: Samples per recording (evenly strided over the record).
         seed: Seed of the draws.
 
@@ -204,7 +229,8 @@ def fit_channel(
 
     Raises:
         FitError: If the channel is missing from a recording, is a planar
-            channel, or the recordings do not match the fit.
+            channel, the recordings do not match the fit, or a recording lies
+            off every predicted branch.
     """
     if channel in recordings.planar:
         raise FitError(f"channel {channel!r} is one of the planar pair {recordings.planar}; "
@@ -212,42 +238,45 @@ def fit_channel(
     for rec in recordings.recordings:
         if channel not in rec.channels:
             raise FitError(f"{rec.name}: no channel {channel!r}; found {sorted(rec.channels)}")
-    feats = fit_.features
+    feats = post.features
     if tuple(feats.names) != tuple(recordings.names):
-        raise FitError(f"recordings {recordings.names} are not those of the fit {feats.names}")
+        raise FitError(f"recordings {tuple(recordings.names)} are not those of the fit "
+                       f"{tuple(feats.names)}")
     rng = np.random.default_rng(seed)
-    n_total = np.shape(fit_.samples["mu0"])[0]
-    idx = np.sort(rng.choice(n_total, size=min(n_draws, n_total), replace=False))
-    sites = {k: v[idx] for k, v in _site_arrays(fit_.samples, fit_.spec).items()}
-    signs = branch_signs(feats.unstable).astype(float)
-    find = _phase_finder(fit_.spec)
+    mu0 = np.asarray(post.samples["mu0"])
+    idx = np.sort(rng.choice(mu0.size, size=min(n_draws, mu0.size), replace=False))
+    theta, betas = _draws(post, idx)
+    find = _jitted(post.spec)[1]
     n_c = 2 * n_harmonics + 1
     phi_grid = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
     proj = np.linalg.pinv(_fourier(phi_grid, n_harmonics))  # grid values -> coefficients
     y_coeffs = np.empty((idx.size, len(recordings), n_c))
     b_coeffs = np.empty((idx.size, len(recordings), n_c, len(BASIS)))
     # a central draw (nearest the posterior median of μ0) for the plotted phases
-    ref = int(np.argmin(np.abs(np.asarray(fit_.samples["mu0"])[idx]
-                               - np.median(fit_.samples["mu0"]))))
+    ref = int(np.argmin(np.abs(mu0[idx] - np.median(mu0))))
     phases = []
     for i, rec in enumerate(recordings.recordings):
+        sign = -1.0 if feats.unstable[i] else 1.0
         stride = max(1, rec.t.size // max_samples)
         z = np.stack([rec.channels[c][::stride] for c in recordings.planar], axis=-1)
         y = np.asarray(rec.channels[channel][::stride], float)
-        w = jnp.asarray(fit_.spec.frame.to_frame(z))
-        phi = np.asarray(find(sites, jnp.asarray(feats.mu[i]), jnp.asarray(signs[i]), w))
+        w = jnp.asarray(post.spec.frame.to_frame(z))
+        phi = np.asarray(find(theta, betas, jnp.asarray(feats.mu[i], float), jnp.asarray(sign),
+                              w))
         for d in range(idx.size):
             y_coeffs[d, i] = np.linalg.lstsq(_fourier(phi[d], n_harmonics), y, rcond=None)[0]
-        b = _basis_along_orbits(fit_, idx, feats.mu[i], signs[i], phi_grid)  # (d, 64, p)
+        b = _basis_along_orbits(post, idx, feats.mu[i], sign, phi_grid)   # (d, 64, p)
         b_coeffs[:, i] = np.einsum("cn,dnp->dcp", proj, b)
         phases.append((phi[ref], y))
     if not (np.all(np.isfinite(y_coeffs)) and np.all(np.isfinite(b_coeffs))):
-        raise FitError(f"channel {channel!r}: a recording lies off every predicted branch")
+        raise FitError(f"channel {channel!r}: a recording lies off its predicted branch in some "
+                       "posterior draws (the orbit does not exist at its μ); expected every "
+                       "recording on its branch")
     beta = np.empty((idx.size, len(BASIS)))
     sigma = np.empty(idx.size)
     for d in range(idx.size):
         beta[d], sigma[d] = _regression_draw(b_coeffs[d].reshape(-1, len(BASIS)),
-                                      y_coeffs[d].reshape(-1), rng)
+                                             y_coeffs[d].reshape(-1), rng)
     amp = np.ptp(y_coeffs[ref] @ _fourier(np.linspace(0, 2 * np.pi, 256), n_harmonics).T,
                  axis=-1)
     return ChannelFit(name=channel, units=recordings.recordings[0].units.get(channel, ""),

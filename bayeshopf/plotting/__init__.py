@@ -6,8 +6,7 @@ a :class:`~bayeshopf.diagnostics.ppc.PosteriorPredictiveCheck`, ...) and returns
 a new :class:`matplotlib.figure.Figure` that is not registered with pyplot, so
 no global matplotlib state (current figure, rcParams) is read or changed.
 :func:`save_figure` writes a figure atomically and :func:`plot_all` draws the
-standard set of a fit (:class:`~bayeshopf.posterior.HybridPosterior`, or the legacy
-:class:`~bayeshopf.pipeline.HopfFit`).
+standard set of a fit (:class:`~bayeshopf.posterior.HybridPosterior`).
 """
 
 from __future__ import annotations
@@ -18,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.bifurcation import default_mu_grid
 from bayeshopf.plotting._io import save_figure
 from bayeshopf.plotting.diagram import plot_bifurcation
 from bayeshopf.plotting.phase import plot_phase_portraits
@@ -54,12 +52,11 @@ def diagram_grid(fit, n: int = 100, n_refine: int = 25) -> np.ndarray:
     by two grid steps.
 
     Args:
-        fit: A :class:`~bayeshopf.pipeline.HopfFit`.
-        n: Points of the uniform base grid (:func:`default_mu_grid`).
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior`.
+        n: Points of the uniform base grid (its ``default_mu_grid``).
         n_refine: Extra points about each of the Hopf and fold points.
     """
-    base = (fit.default_mu_grid(n) if hasattr(fit, "default_mu_grid")
-            else default_mu_grid(fit.spec, fit.samples, n))
+    base = fit.default_mu_grid(n)
     step = float(base[1] - base[0])
     extra = []
     for name in ("mu0", "mu_fold"):
@@ -103,7 +100,7 @@ def plot_all(
     (:func:`plot_time_series`, z1 over four periods of each recording).
 
     Args:
-        fit: A :class:`~bayeshopf.pipeline.HopfFit`.
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior`.
         recordings: The recordings it was fitted to (for the phase portraits).
         out_dir: Destination folder (created if missing).
         truth: Optional planted system
@@ -131,12 +128,11 @@ def plot_all(
             amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
             zoom=default_zoom(fit, mu) if zoom else None,
         ),
-        plot_phase_portraits(fit.samples, fit.spec, recordings, truth=orbit_truth,
-                             orbits=getattr(fit, "orbits", None)),
+        plot_phase_portraits(fit, recordings, truth=orbit_truth),
         plot_ppc(ppc, amplitude_units=fit.amplitude_units, amplitude_label=amp_label),
     ]
     names = list(FIGURE_NAMES)
-    if getattr(fit, "has_frequency", False):
+    if fit.has_frequency:
         bands, pred = [], []
         branches = ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
         for b in branches:

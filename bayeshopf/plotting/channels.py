@@ -24,14 +24,14 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
     """Measured channel against normal-form phase per recording, and its amplitude against μ.
 
     Each recording's panel shows the measured samples placed on the predicted
-    orbit (φ from the inverted map), the posterior median waveform and the 90%
-    band of a new recording's waveform. The last panel shows the channel's
-    peak-to-peak against μ on both branches (median, 90% band) with the
-    measured values.
+    orbit (φ of the nearest point of the orbit in the frame), the posterior
+    median waveform and the 90% band of a new recording's waveform. The last
+    panel shows the channel's peak-to-peak against μ on both branches (median,
+    90% band) with the measured values.
 
     Args:
         channel_fit: A :class:`~bayeshopf.inference.channels.ChannelFit`.
-        fit_: The :class:`~bayeshopf.pipeline.HopfFit` it was made from.
+        fit_: The :class:`~bayeshopf.posterior.HybridPosterior` it was made from.
         mu_grid: μ grid of the amplitude panel.
         n_cols: Panels per row.
         max_points: Measured samples drawn per panel.

@@ -300,7 +300,7 @@ def plot_bifurcation(
     quantiles beyond it are clipped.
 
     Args:
-        diagram: The posterior diagram (:meth:`HopfFit.diagram`).
+        diagram: The posterior diagram (:meth:`~bayeshopf.posterior.HybridPosterior.diagram`).
         ppc: Posterior predictive check of the training recordings; when given,
             the measured amplitudes are drawn as markers (filled circles stable,
             open squares unstable) with each recording's 90% predictive interval.

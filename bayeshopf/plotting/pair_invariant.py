@@ -11,6 +11,7 @@ from bayeshopf.diagnostics.pair_invariant import (
     leave_one_pair_out,
 )
 from bayeshopf.diagnostics.summaries import CI
+from bayeshopf.model.collapsed import unfolding
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
     LABEL_SIZE,
@@ -33,13 +34,18 @@ def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str =
     least-squares line ``x = (μ0 − μ)/a2²`` through all pairs with its 90%
     band, and, for each pair, the line through the others (dashed) with its
     prediction at that pair's μ (open marker, 90% interval). With ``fit``, the
-    hybrid fit's own line, from its posterior draws of μ0 and a2, is drawn too.
+    hybrid fit's own curve ``x = −β(μ)/a2²`` from its posterior draws is drawn
+    too: ``β(μ) = μ − μ0`` (a straight line) for the linear unfolding, and the
+    curved unfolding :func:`~bayeshopf.model.collapsed.unfolding` of a
+    :class:`~bayeshopf.posterior.HybridPosterior` fitted with it (draws of ``w``).
     ``x`` is 1/4 at the fold and 0 at the Hopf point.
 
     Args:
         pairs: From :func:`~bayeshopf.diagnostics.pair_invariant.pair_invariants`
             (two or more at distinct μ).
-        fit: Optional subcritical :class:`~bayeshopf.pipeline.HopfFit`.
+        fit: Optional subcritical fit with posterior ``samples`` of ``mu0`` and
+            ``a2`` (and ``w_unfold``, ``mu_fold`` for the curved unfolding), e.g. a
+            :class:`~bayeshopf.posterior.HybridPosterior`.
         mu_label: Name of μ (axis label).
         mu_units: Unit of μ.
 
@@ -59,10 +65,16 @@ def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str =
                     gid="all-pairs-band")
     ax.plot(grid, line.x_at(grid), color="k", lw=1.2, gid="all-pairs-line")
     if fit is not None:
-        mu0, a2 = np.asarray(fit.samples["mu0"]), np.asarray(fit.samples["a2"])
-        q = np.quantile((mu0[:, None] - grid) / a2[:, None] ** 2, _Q, axis=0)
-        ax.plot(grid, q[1], color=BRANCH_COLOURS["stable"], lw=1.0,
-                label="hybrid fit: (μ0 − μ)/a2²", gid="fit-line")
+        s = fit.samples
+        mu0, a2 = np.asarray(s["mu0"])[:, None], np.asarray(s["a2"])[:, None]
+        if "w_unfold" in s:
+            beta = np.asarray(unfolding(grid, mu0, np.asarray(s["w_unfold"])[:, None],
+                                        np.asarray(s["mu_fold"])[:, None]))
+            label = "hybrid fit: −β(μ)/a2² (curved)"
+        else:
+            beta, label = grid - mu0, "hybrid fit: (μ0 − μ)/a2²"
+        q = np.quantile(-beta / a2**2, _Q, axis=0)
+        ax.plot(grid, q[1], color=BRANCH_COLOURS["stable"], lw=1.0, label=label, gid="fit-line")
         ax.fill_between(grid, q[0], q[2], color=BRANCH_COLOURS["stable"], alpha=0.2, lw=0,
                         gid="fit-band")
     for k, (held, other) in enumerate(leave_one_pair_out(pairs)):

@@ -11,9 +11,6 @@ from matplotlib.legend_handler import HandlerTuple
 from matplotlib.lines import Line2D
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.predictive import orbit_draws
-from bayeshopf.model import normal_form
-from bayeshopf.model.hybrid import ModelSpec
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
     LABEL_SIZE,
@@ -55,15 +52,13 @@ def _format_mu(mu: float) -> str:
 
 
 def plot_phase_portraits(
-    samples: dict,
-    spec: ModelSpec,
+    fit,
     recordings: RecordingSet,
     *,
     n_orbits: int = 60,
     max_points: int = 4000,
     truth: OrbitTruth | None = None,
     mu_symbol: str = "μ",
-    orbits: OrbitTruth | None = None,
 ) -> Figure:
     """Plot each recording's measured orbit over the posterior predicted orbits.
 
@@ -74,8 +69,8 @@ def plot_phase_portraits(
     orbit exists) is a bold line.
 
     Args:
-        samples: Posterior draws (:attr:`HopfFit.samples`).
-        spec: Model structure (:attr:`HopfFit.spec`).
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior`, or anything with
+            ``orbits(mu, branch) -> draws (n, n_phi, 2)`` in physical units.
         recordings: The recordings to show (normally the training set).
         n_orbits: Posterior orbit draws drawn per panel.
         max_points: Most measured samples drawn per panel (the record is
@@ -83,9 +78,6 @@ def plot_phase_portraits(
         truth: Optional ``truth(mu, branch) -> points (n, 2)``, drawn as a thin
             black dashed closed curve.
         mu_symbol: Symbol of μ in the panel titles.
-        orbits: Optional ``orbits(mu, branch) -> draws (n, n_phi, 2)`` of the
-            posterior orbits in physical units; by default they come from
-            ``samples`` and ``spec`` (the legacy core).
 
     Returns:
         The figure, one axes per recording.
@@ -106,14 +98,12 @@ def plot_phase_portraits(
         style_axes(ax)
         ax.minorticks_off()
         colour = BRANCH_COLOURS[rec.branch]
-        sign = normal_form.STABLE if rec.branch == "stable" else normal_form.UNSTABLE
 
         measured = _subsample(np.asarray(rec.planar(recordings.planar), float), max_points)
         ax.plot(measured[:, 0], measured[:, 1], color=MEASURED_GREY, lw=0.5, alpha=0.8, zorder=1,
                 gid="measured")
 
-        draws = np.asarray(orbit_draws(samples, spec, rec.mu, sign) if orbits is None
-                           else orbits(rec.mu, rec.branch), float)
+        draws = np.asarray(fit.orbits(rec.mu, rec.branch), float)
         exists = np.all(np.isfinite(draws), axis=(1, 2))
         draws = draws[exists]
         if draws.shape[0]:

@@ -55,7 +55,7 @@ def plot_ppc(
     clipped at ±3.
 
     Args:
-        ppc: The check (:meth:`HopfFit.ppc`).
+        ppc: The check (:meth:`~bayeshopf.posterior.HybridPosterior.ppc`).
         amplitude_units: Unit of the amplitude.
         amplitude_label: Name of the amplitude in the axis labels (e.g.
             ``"peak-to-peak of h"``).
@@ -112,12 +112,9 @@ def plot_ppc(
     n_rec, n_c = z.shape
     im = ax_b.imshow(np.clip(z, -Z_CLIP, Z_CLIP), cmap="RdBu_r", vmin=-Z_CLIP, vmax=Z_CLIP,
                      aspect="auto", interpolation="nearest", gid="coeff-z")
-    if n_c % 2:  # R(θ) coefficients (legacy core)
-        labels, what = coefficient_labels(n_c), "Fourier coefficient of R(θ)"
-    else:        # time-harmonic coefficients of two channels (collapsed core)
-        half = coefficient_labels(n_c // 2)
-        labels = [f"{c}:{k}" for c in ("z1", "z2") for k in half]
-        what = "time-Fourier coefficient of z1, z2 (phase-aligned)"
+    half = coefficient_labels(n_c // 2)     # the time harmonics of both channels of the frame
+    labels = [f"{c}:{k}" for c in ("z1", "z2") for k in half]
+    what = "time-Fourier coefficient of z1, z2 (phase-aligned)"
     ax_b.set_xticks(np.arange(n_c), labels, fontsize=TICK_SIZE - 1,
                     rotation=90 if n_c > 12 else 0)
     ax_b.set_yticks(np.arange(n_rec), list(ppc.names), fontsize=TICK_SIZE - 1)

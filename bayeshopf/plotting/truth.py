@@ -28,7 +28,9 @@ def plot_diagram_vs_truth(
     """The posterior bifurcation diagram over the true one, with held-out orbits.
 
     Args:
-        fit: A :class:`~bayeshopf.pipeline.HopfFit` of a simulated experiment.
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior` of a simulated
+            experiment (it needs ``diagram``, ``ppc``, ``interval``,
+            ``default_mu_grid``, ``features``, ``spec`` and the unit labels).
         truth: Its :class:`~bayeshopf.simulators.truth.SimulatedTruth` (or any
             object with ``amplitude(mu, branch)``).
         held_out: Rows of :func:`~bayeshopf.simulators.truth.held_out_check`;

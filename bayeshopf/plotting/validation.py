@@ -1,4 +1,4 @@
-"""The leave-one-out figure (the paper's Fig. exp_val), with bands."""
+"""The leave-one-out figure (the paper's Fig. exp_val), with bands, on the collapsed core."""
 
 from __future__ import annotations
 
@@ -7,9 +7,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from bayeshopf.diagnostics.bifurcation import bifurcation_diagram
-from bayeshopf.errors import DataError, FitError
-from bayeshopf.features.orbits import OrbitFeatures
+from bayeshopf.errors import DataError
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
     BRANCH_MARKERS,
@@ -22,34 +20,28 @@ from bayeshopf.plotting._style import (
     style_axes,
 )
 from bayeshopf.plotting.diagram import _draw_band
+from bayeshopf.validation import plug_in_amplitude
 
-#: Colours of the point fits.
-POINT_COLOURS = {"map": "#555555", "ml": "#2ca02c"}
-POINT_STYLES = {"map": ":", "ml": "-."}
-
-
-def _point_curve(fit_, mu, branch):
-    try:
-        return fit_.amplitude(mu, branch)[0]
-    except FitError:  # a supercritical point fit has no unstable branch
-        return np.full(np.shape(mu), np.nan)
+#: Colour and line style of the MAP plug-in curve.
+POINT_COLOUR = "#555555"
+POINT_STYLE = ":"
 
 
-def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: str = "airspeed",
+def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed",
                        mu_units: str = "m/s", amplitude_units: str = "m",
                        n_cols: int = 4) -> Figure:
     """One panel per held-out recording, and a last panel with the fold per fold.
 
     Each panel shows the Bayesian fit without that recording (median, 50% and
-    90% bands of both branches, dotted 90% band of a new recording), the
-    point fits' curves (MAP, maximum likelihood), the training recordings and
-    the held-out one (a star; filled where it lies inside the Bayesian 90%
-    band). The last panel shows μ_SN of every fold: Bayesian median with its
-    90% interval, and the point estimates.
+    90% bands of both branches, dotted 90% band of a new recording), the MAP
+    plug-in curve, the training recordings and the held-out one (a star;
+    filled where it lies inside the Bayesian 90% band). The last panel shows
+    μ_SN of every fold: Bayesian median with its 90% interval, and the MAP's.
 
     Args:
         loo: A :class:`~bayeshopf.validation.LeaveOneOut` made with ``keep_fits=True``.
-        features: Features of all recordings (measured amplitudes).
+        features: Features of all recordings (``mu``, ``unstable``, ``amplitude``,
+            ``names``; :class:`~bayeshopf.features.harmonics.HarmonicFeatures`).
         mu_grid: μ grid of the curves (default: the data's range widened).
         mu_label: Name of μ (axis label).
         mu_units: Unit of μ.
@@ -58,8 +50,11 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
 
     Returns:
         The figure.
+
+    Raises:
+        DataError: If the folds' fits were not kept.
     """
-    if any(f.fits is None for f in loo.folds):
+    if any(f.fit is None for f in loo.folds):
         raise DataError("plot_leave_one_out needs the folds' fits; got a LeaveOneOut made "
                         "without keep_fits=True")
     mu_all = np.asarray(features.mu, float)
@@ -74,17 +69,17 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
     y_max = 1.25 * float(np.nanmax(features.amplitude))
     for ax, fold in zip(axes, loo.folds, strict=False):
         style_axes(ax)
-        if "bayes" in fold.fits:
-            bfit = fold.fits["bayes"]
-            diag = bifurcation_diagram(bfit.samples, bfit.spec, mu_grid, seed=bfit.seed)
+        post = fold.fit
+        branches = ("stable", "unstable") if post.criticality == "subcritical" else ("stable",)
+        if "bayes" in loo.methods:
+            diag = post.diagram(mu_grid)
             for branch, band in (("stable", diag.stable), ("unstable", diag.unstable)):
                 if band is not None:
                     _draw_band(ax, branch, band, 0.5)
-        for m in ("map", "ml"):
-            if m in fold.fits:
-                for branch in ("stable", "unstable"):
-                    ax.plot(mu_grid, _point_curve(fold.fits[m], mu_grid, branch),
-                            color=POINT_COLOURS[m], ls=POINT_STYLES[m], lw=1.1)
+        if "map" in loo.methods:
+            for branch in branches:
+                ax.plot(mu_grid, plug_in_amplitude(post, mu_grid, branch), color=POINT_COLOUR,
+                        ls=POINT_STYLE, lw=1.1, gid=f"map-{branch}")
         keep = np.array([n != fold.name for n in names])
         for branch, mask in (("stable", ~features.unstable), ("unstable", features.unstable)):
             sel = keep & mask
@@ -107,11 +102,9 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
         fm = np.array([f.predictions["bayes"].mu_fold for f in loo.folds])
         ax.errorbar(x, fm[:, 0], yerr=[fm[:, 0] - fm[:, 1], fm[:, 2] - fm[:, 0]], fmt="o",
                     color=BRANCH_COLOURS["stable"], capsize=3, ms=4, label="Bayesian, 90%")
-    for k, m in enumerate(("map", "ml")):
-        if m in loo.methods:
-            v = [f.predictions[m].mu_fold[0] for f in loo.folds]
-            ax.plot(x + 0.15 * (k + 1), v, ls="none", marker="sx"[k], color=POINT_COLOURS[m],
-                    ms=5, label={"map": "MAP only", "ml": "max. likelihood (paper)"}[m])
+    if "map" in loo.methods:
+        v = [f.predictions["map"].mu_fold[0] for f in loo.folds]
+        ax.plot(x + 0.15, v, ls="none", marker="s", color=POINT_COLOUR, ms=5, label="MAP")
     ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=TICK_SIZE - 2,
                   rotation=45)
     ax.set_xlim(-0.5, len(loo.folds) - 0.2)
@@ -125,9 +118,7 @@ def plot_leave_one_out(loo, features: OrbitFeatures, *, mu_grid=None, mu_label: 
         Patch(color=BRANCH_COLOURS["stable"], alpha=0.35, label="Bayesian stable (50/90%)"),
         Patch(color=BRANCH_COLOURS["unstable"], alpha=0.35, label="Bayesian unstable (50/90%)"),
         Line2D([], [], color="k", ls=":", lw=0.8, label="90% band of a new recording"),
-        Line2D([], [], color=POINT_COLOURS["map"], ls=POINT_STYLES["map"], label="MAP only"),
-        Line2D([], [], color=POINT_COLOURS["ml"], ls=POINT_STYLES["ml"],
-               label="maximum likelihood (paper)"),
+        Line2D([], [], color=POINT_COLOUR, ls=POINT_STYLE, label="MAP plug-in"),
         Line2D([], [], ls="none", marker="*", ms=11, mfc="gold", mec="k",
                label="held out (filled: inside 90%)"),
     ]

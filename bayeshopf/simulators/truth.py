@@ -65,8 +65,8 @@ __all__ = [
 #: within 0.1–0.3 m/s of the fold and the Hopf point, as a CBC experiment can
 #: measure them. (A plan whose unstable orbits stop 0.5 m/s short of the Hopf
 #: point, such as the simulator's ``default_plan``, leaves μ0 and the fold to an
-#: extrapolation that biases both low by about 0.1 m/s; see
-#: ``benchmarks/calibration.md``.)
+#: extrapolation that biases both low by about 0.1 m/s, as measured with an
+#: earlier inference core.)
 FLUTTER_PLAN: tuple[tuple[float, str], ...] = (
     (15.0, "stable"), (15.8, "stable"), (16.6, "stable"), (17.4, "stable"),
     (15.1, "unstable"), (16.2, "unstable"), (17.2, "unstable"), (18.0, "unstable"),
@@ -391,7 +391,9 @@ def held_out_check(fit, truth: SimulatedTruth, points=None, *, mass: float = 0.9
     ``fit.amplitude(mu, branch, predictive=True)``.
 
     Args:
-        fit: A :class:`~bayeshopf.pipeline.HopfFit`.
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior` (or any object
+            with ``amplitude(mu, branch, predictive=True)`` returning draws
+            ``(n, n_mu)``, ``nan`` where the branch does not exist).
         truth: The experiment's :class:`SimulatedTruth`.
         points: ``((mu, branch), ...)``; default ``truth.held_out``.
         mass: Probability mass of the interval.

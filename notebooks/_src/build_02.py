@@ -20,19 +20,24 @@ Pol oscillator** (supercritical Hopf point at μ = 0) and a **3-DOF aeroelastic 
 Hopf point at 18.27 m/s, fold of cycles at 14.94 m/s). Their fits were started with μ0 and a2 at the
 true values, on noise-free data, and gave point estimates.
 
-Here both are refitted **blind**: `bayeshopf.fit` starts from data-driven values, the recordings
+Here both are refitted **blind** on the collapsed core (`bayeshopf.posterior.fit_hybrid`, as
+`bayeshopf fit` does): a deterministic start from the data, the MAP, then NUTS over the normal form
+and the hyperparameters with the map's linear coefficients integrated out exactly. The recordings
 carry 1 % measurement noise and sensor offsets, and every result has a 90 % interval. The truth is
 the simulator's own (`bayeshopf.simulators`): the Hopf point from the Jacobian eigenvalues, and the
 periodic orbits, their amplitudes and the fold by shooting and pseudo-arclength continuation. The
 checks:
 
-* the 90 % intervals of μ0 (both systems), of the fold μ_SN and of a2 (aerofoil) contain the truth;
+* the 90 % intervals of μ0 (both systems) and of the fold μ_SN (aerofoil) contain the truth;
 * orbits at μ values **not used for training** lie inside the 90 % posterior predictive bands;
 * the fitted bifurcation diagram and phase portraits follow the true ones;
+* the fit's own checks pass (NUTS R̂ and bulk ESS, orbit errors, predictive checks:
+  `post.diagnostics`);
 * over 20 noise seeds, the intervals cover the truth at about their nominal rate
-  (`benchmarks/bench_calibration.py`, summarised at the end).
+  (`benchmarks/bench_calibration_collapsed.py`, summarised at the end).
 
-Set `BAYESHOPF_FAST=1` before starting the kernel for a quick run (short records and fits)."""),
+Set `BAYESHOPF_FAST=1` before starting the kernel for a quick run (short records and short NUTS
+chains, whose convergence checks then usually warn)."""),
     new_code_cell("""import os
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
@@ -47,9 +52,10 @@ import numpy as np
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
-from bayeshopf.features.orbits import extract_features
-from bayeshopf.pipeline import FitSettings, fit
+from bayeshopf.features.harmonics import extract_harmonics
+from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import plot_phase_portraits, plot_ppc
+from bayeshopf.posterior import fit_hybrid
 from bayeshopf.plotting.truth import plot_diagram_vs_truth
 from bayeshopf.simulators.truth import (
     flutter_experiment,
@@ -59,14 +65,17 @@ from bayeshopf.simulators.truth import (
 )
 
 %matplotlib inline
-settings = FitSettings.fast() if FAST else FitSettings()
-print(f"bayeshopf {bh.__version__}; fast mode: {FAST}")
+settings = CollapsedSettings.fast() if FAST else CollapsedSettings()
+print(f"bayeshopf {bh.__version__}; fast mode: {FAST}; NUTS {settings.num_chains} chains x "
+      f"({settings.num_warmup} + {settings.num_samples})")
 
 
 def interval_table(result, truth):
+    # μ0 and the fold against the truth (a2 too under the paper's linear unfolding)
+    curved = result.spec.unfolding == "curved"
     rows = ["| quantity | median | 90% interval | true | inside? |", "|---|---:|---|---:|---|"]
     for q, true in truth.values().items():
-        if true is None:
+        if true is None or (q == "a2" and curved):
             continue
         iv = result.interval(q)
         rows.append(f"| {q} | {iv.median:.4f} | [{iv.lo:.4f}, {iv.hi:.4f}] | {true:.4f} "
@@ -82,7 +91,28 @@ def held_out_table(rows, unit):
                      f"| [{r['lo']:.4g}, {r['hi']:.4g}] | {'yes' if r['inside'] else '**no**'} |")
     display(Markdown("\\n".join(lines)))
     n_in = sum(r["inside"] for r in rows)
-    print(f"{n_in}/{len(rows)} held-out orbits inside their 90% predictive intervals")"""),
+    print(f"{n_in}/{len(rows)} held-out orbits inside their 90% predictive intervals")
+
+
+def show_diagnostics(result):
+    # the fit's own checks: MAP, NUTS convergence, orbit errors, warnings
+    d = result.diagnostics
+    p = d["posterior"]
+    line = f"MAP gradient norm {d['map']['grad_norm']:.1e} ({'converged' if d['map']['converged'] else 'NOT converged'})"
+    if p["method"] == "nuts" and p["sites"]:
+        r = max(v["r_hat"] for v in p["sites"].values())
+        e = min(v["ess_bulk"] for v in p["sites"].values())
+        line += (f"; NUTS {p['chains']} chains: largest R-hat {r:.3f} (limit {p['r_hat_max']}), "
+                 f"smallest bulk ESS {e:.0f} (limit {p['ess_min']}), {p['divergences']} divergences")
+    print(line)
+    errs = [e["relative"] for e in d["fit"]["orbit_error"] if e["relative"] is not None]
+    print(f"orbit errors {100 * min(errs):.2f}-{100 * max(errs):.2f}% of the orbit size; "
+          f"amplitudes inside their 90% predictive bands: {sum(d['fit']['amplitude_covered'])}/"
+          f"{len(d['fit']['amplitude_covered'])}")
+    for w in d["warnings"]:
+        print("warning:", w)
+    if not d["warnings"]:
+        print("no warning")"""),
     new_markdown_cell("""## 1. Van der Pol oscillator (Section 4.1)
 
 $$\\dot z_1 = z_2, \\qquad \\dot z_2 = 2\\mu z_2 - z_1^2 z_2 - z_1 .$$
@@ -92,9 +122,11 @@ with one stable limit cycle for μ > 0 whose peak-to-peak grows as $4\\sqrt{2\\m
 recordings at μ = 0.05, 0.10, …, 0.50 (150 s at 20 Hz, 22–24 periods each) of both states, with 1 %
 noise and offsets; five more μ, between them, are held out. The paper's plan, 0.1 … 1.0, is
 `VANDERPOL_PAPER_PLAN`: by μ = 1 the cycle is relaxation-like ($z_2$ swings twice as far as $z_1$
-and the orbit turns sharply at the extremes of $z_1$), its R(θ) converges slowly (the cell below
-measures the 8-harmonic overshoot of the peak-to-peak on noise-free recordings), and the fitted map
-follows the corners less well.
+and the orbit turns sharply at the extremes of $z_1$), its Fourier series converges slowly, and the
+fitted map follows the corners less well. The collapsed core fits the phase-aligned time-Fourier
+coefficients of both channels (`bayeshopf.features.harmonics`, K = 4 harmonics by default); the
+cell below measures, on noise-free recordings, how far the peak-to-peak of that K-harmonic
+reconstruction is from the true one on this plan.
 
 **The normal form of a supercritical point.** The paper fits this oscillator with $a_2 = -1$ and no
 fifth-order term, $\\dot r = (\\mu - \\mu_0) r - r^3$: the square-root law $r^2 = \\mu - \\mu_0$ of a
@@ -105,16 +137,19 @@ reaches the square-root law only as $a_2 \\to -\\infty$; a prior there held the 
 that the map made up for with a μ-dependent tilt, and the fitted orbits were tilted ellipses.)"""),
     new_code_cell("""rs_v, truth_v = vanderpol_experiment(seed=0, fast=FAST)
 clean, _ = vanderpol_experiment(seed=0, noise=0.0, fast=FAST)
-feats = extract_features(clean)
-exact = np.array([truth_v.exact_amplitude(m, b) for m, b in truth_v.plan])
-rows = ["| μ | true peak-to-peak of z1 | 8-harmonic R(θ) reconstruction | overshoot |",
+feats = extract_harmonics(clean, n_harmonics=settings.n_harmonics,
+                          segment_periods=settings.segment_periods)
+exact = np.array([truth_v.exact_amplitude(r.mu, r.branch) for r in clean])
+rows = ["| μ | true peak-to-peak of z1 | K-harmonic reconstruction | difference |",
         "|---:|---:|---:|---:|"]
 for m, e, a in zip(feats.mu, exact, feats.amplitude, strict=True):
     rows.append(f"| {m:g} | {e:.4f} | {a:.4f} | {100 * (a / e - 1):+.2f}% |")
 display(Markdown("\\n".join(rows)))
-print(f"Hopf point (Jacobian): mu0 = {truth_v.mu0:.2e}; offsets {truth_v.offsets}")"""),
-    new_code_cell("""result_v = fit(rs_v, "supercritical", seed=0, settings=settings, progress=False)
+print(f"K = {feats.n_harmonics} harmonics; Hopf point (Jacobian): mu0 = {truth_v.mu0:.2e}; "
+      f"offsets {truth_v.offsets}")"""),
+    new_code_cell("""result_v = fit_hybrid(rs_v, "supercritical", seed=0, settings=settings, progress=False)
 print("seconds per stage:", {k: round(v, 1) for k, v in result_v.timings.items()})
+show_diagnostics(result_v)
 interval_table(result_v, truth_v)
 a4_v = result_v.interval("a4")
 print(f"a4 = {a4_v.median:.4f} [{a4_v.lo:.4f}, {a4_v.hi:.4f}]: the quintic term in the "
@@ -126,18 +161,17 @@ display(plot_diagram_vs_truth(result_v, truth_v, rows_v,
     new_markdown_cell("""The phase portraits of the training recordings (grey), with 60 posterior orbit draws and their
 pointwise median, and the true orbit (dashed). Then the same at the held-out μ, from fresh
 recordings the fit never saw."""),
-    new_code_cell("""display(plot_phase_portraits(result_v.samples, result_v.spec, rs_v, truth=truth_v.orbit))
-display(plot_phase_portraits(result_v.samples, result_v.spec, held_out_recordings(truth_v),
-                             truth=truth_v.orbit))"""),
+    new_code_cell("""display(plot_phase_portraits(result_v, rs_v, truth=truth_v.orbit))
+display(plot_phase_portraits(result_v, held_out_recordings(truth_v), truth=truth_v.orbit))"""),
     new_markdown_cell("""**Why the map varies with μ to second order.** μ0 is an extrapolation from the smallest
 training μ, 0.05, to zero amplitude, and the LCOs alone do not pin it: they lie on
 $|u|^2 = \\mu - \\mu_0$ (at κ = 0), so a map whose gain changes with μ trades against a shift of μ0.
 How the map may vary with μ therefore decides μ0. In the whitened frame the mean radius of these
-orbits, squared, grows 5.5 % faster than μ between μ = 0.05 and 0.5 (the radius 2.7 % faster than √μ), roughly as μ². With a
-map that changes only linearly with μ ($T_u = L_0 + \\tilde\\mu L_1$) the MAP put μ0 at −0.002,
-without any change at +0.004, and each posterior was only 0.001 wide; the second-order term
-$\\tilde\\mu^2 L_2$ (prior a tenth of $L_1$'s, `bayeshopf/model/coordinate_map.py`) lets the gain curve
-and brings μ0 back to the truth (table above)."""),
+orbits, squared, grows 5.5 % faster than μ between μ = 0.05 and 0.5 (the radius 2.7 % faster than
+√μ), roughly as μ². The collapsed map has gains linear and quadratic in μ̃,
+$(\\tilde\\mu L_1 + \\tilde\\mu^2 L_2)\\,\\tilde u$, with prior scales $ρ τ_μ$ and $ρ τ_μ^2$, and the
+hyperparameter $τ_μ$ is integrated over with μ0 (`bayeshopf/model/collapsed.py`): the posterior
+of μ0 carries the trade-off instead of fixing it by a choice of prior."""),
     new_markdown_cell("""## 2. The 3-DOF aeroelastic aerofoil (Section 4.2)
 
 $M\\ddot{x} + D(U)\\dot{x} + K(U)x + N(\\alpha) = 0$ for heave $h$, pitch α and an aerodynamic lag
@@ -154,10 +188,13 @@ place them; seven more orbits are held out.
 
 The mean pitch of an orbit moves by 0.035 rad between the smallest and the largest orbits (the
 quadratic pitch stiffness), more than the half-amplitude of the unstable orbit at 18 m/s: the mean
-of the orbit centres lies outside that orbit. The features then use the point deepest inside every
-orbit as the common centre (`PlanarFrame.from_orbits(..., centre="deepest")`)."""),
+of the orbit centres lies outside that orbit. The collapsed core's features need no centre inside
+the orbits: they are the time-Fourier coefficients of each channel in a common affine frame
+(`bayeshopf.features.harmonics`, no polar angle), phase-aligned at the crest of the first channel's
+fundamental, with standard errors from the spread over segments of five periods."""),
     new_code_cell("""rs_f, truth_f = flutter_experiment(seed=0, fast=FAST)
-feats_f = extract_features(rs_f)
+feats_f = extract_harmonics(rs_f, n_harmonics=settings.n_harmonics,
+                            segment_periods=settings.segment_periods)
 rows = ["| recording | μ (m/s) | branch | heave p-p (mm) | true (mm) | frequency (Hz) | segments |",
         "|---|---:|---|---:|---:|---:|---:|"]
 for i, r in enumerate(rs_f):
@@ -168,46 +205,56 @@ display(Markdown("\\n".join(rows)))
 print("truth:", {k: round(v, 4) for k, v in truth_f.values().items()}, "offsets:",
       {k: round(v, 5) for k, v in truth_f.offsets.items()})
 print("common centre of the frame:", feats_f.frame.centre.round(5))"""),
-    new_code_cell("""result_f = fit(rs_f, "subcritical", seed=0, settings=settings, progress=False)
+    new_code_cell("""result_f = fit_hybrid(rs_f, "subcritical", seed=0, settings=settings, progress=False)
 print("seconds per stage:", {k: round(v, 1) for k, v in result_f.timings.items()})
+show_diagnostics(result_f)
 interval_table(result_f, truth_f)
-m = result_f.map.params
-print(f"MAP: mu0 = {float(m['mu0']):.4f}, a2 = {float(m['a2']):.4f}, "
-      f"mu_fold = {float(m['mu_fold']):.4f}")"""),
+m = result_f.map_point.params
+print(f"MAP: mu0 = {float(m['mu0']):.4f}, mu_fold = {float(m['mu_fold']):.4f}")
+if result_f.spec.unfolding == "curved":
+    a2, w = result_f.interval("a2"), result_f.interval("w_unfold")
+    print(f"a2 = {a2.median:.3f} [{a2.lo:.3f}, {a2.hi:.3f}], w = {w.median:.2f} [{w.lo:.2f}, "
+          f"{w.hi:.2f}]: the cubic coefficient of the curved unfolding, not the linear one's "
+          f"2 sqrt(mu0 - mu_SN) = {truth_f.a2:.3f}")"""),
     new_code_cell("""rows_f = held_out_check(result_f, truth_f)
 held_out_table(rows_f, "m")
 display(plot_diagram_vs_truth(result_f, truth_f, rows_f,
                               title="3-DOF aerofoil: posterior against the continuation"))"""),
-    new_code_cell("""display(plot_phase_portraits(result_f.samples, result_f.spec, rs_f, truth=truth_f.orbit))
-display(plot_phase_portraits(result_f.samples, result_f.spec, held_out_recordings(truth_f),
-                             truth=truth_f.orbit))"""),
+    new_code_cell("""display(plot_phase_portraits(result_f, rs_f, truth=truth_f.orbit))
+display(plot_phase_portraits(result_f, held_out_recordings(truth_f), truth=truth_f.orbit))"""),
     new_markdown_cell("""The posterior predictive check of the training recordings: each measured amplitude against its
-90 % predictive interval, and the Fourier coefficients of R(θ) against theirs."""),
+90 % predictive interval, and the phase-aligned time-Fourier coefficients of both channels (the
+data the model is fitted to) against theirs, standardised."""),
     new_code_cell("""display(plot_ppc(result_f.ppc(), amplitude_units="m", amplitude_label="peak-to-peak of h"))"""),
     new_markdown_cell("""## 3. Are the intervals calibrated?
 
-One fit says little about calibration. `benchmarks/bench_calibration.py` repeats the aerofoil
-experiment with 20 noise seeds (new noise, phases and sensor offsets each time, the same μ plan) and
-counts how often the 90 % intervals contain the truth, and compares their widths with the spread of
-the posterior medians across seeds (an interval much wider than that spread is right for the wrong
-reason). Its latest results, from `benchmarks/calibration.json`:"""),
-    new_code_cell("""path = Path.cwd().parent / "benchmarks" / "calibration.json"
-if path.exists():
-    cal = json.loads(path.read_text())
-    s, meta = cal["summary"], cal["meta"]
+One fit says little about calibration. `benchmarks/bench_calibration_collapsed.py` repeats the
+aerofoil experiment with 20 noise seeds (100–119: new noise, phases and sensor offsets each time, the
+same μ plan, default settings, none chosen on these seeds) and counts how often the 90 % intervals
+contain the truth, and compares their widths with the spread of the posterior medians across seeds
+(an interval much wider than that spread is right for the wrong reason). Its stored results, from
+`benchmarks/calibration_collapsed/` (a2 is not compared: under the curved unfolding it has no true
+value):"""),
+    new_code_cell("""folder = Path.cwd().parent / "benchmarks" / "calibration_collapsed"
+recs = [json.loads(p.read_text()) for p in sorted(folder.glob("seed_*.json"))]
+recs = [r for r in recs if not r["short"]]
+if recs:
     rows = ["| quantity | coverage | median width | sd of medians | width / (3.29 sd) | bias |",
             "|---|---:|---:|---:|---:|---:|"]
-    for q in ("mu0", "a2", "mu_fold"):
-        v = s[q]
-        rows.append(f"| {q} | {v['inside']}/{v['n']} ({100 * v['coverage']:.0f}%) "
-                    f"| {v['width_median']:.4f} | {v['median_sd']:.4f} "
-                    f"| {v['width_over_spread']:.2f} | {v['bias']:+.4f} |")
-    ho = s["held_out"]
+    for q in ("mu0", "mu_fold"):
+        inside = sum(r[q]["inside"] for r in recs)
+        width = np.median([r[q]["hi"] - r[q]["lo"] for r in recs])
+        sd = np.std([r[q]["median"] for r in recs], ddof=1)
+        bias = np.mean([r[q]["median"] - r[q]["true"] for r in recs])
+        rows.append(f"| {q} | {inside}/{len(recs)} ({100 * inside / len(recs):.0f}%) "
+                    f"| {width:.4f} | {sd:.4f} | {width / (3.29 * sd):.2f} | {bias:+.4f} |")
     display(Markdown("\\n".join(rows)))
-    print(f"{meta['settings']}, {len(cal['records'])} seeds; held-out orbits inside their 90% "
-          f"predictive intervals: {ho['inside']}/{ho['n']}")
+    ho = [h["inside"] for r in recs for h in r["held_out"]]
+    print(f"{len(recs)} seeds ({recs[0]['seed']}-{recs[-1]['seed']}); held-out orbits inside their "
+          f"90% predictive intervals: {sum(ho)}/{len(ho)}; NUTS converged in "
+          f"{sum(r['converged'] for r in recs)}/{len(recs)}")
 else:
-    print("run benchmarks/bench_calibration.py first")"""),
+    print("run benchmarks/bench_calibration_collapsed.py first")"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={

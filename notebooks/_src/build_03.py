@@ -15,19 +15,18 @@ airspeed μ as the bifurcation parameter. They reported a Hopf point at **17.67 
 **14.66 m/s**, and admitted that their fit overfits: the diagram wiggles between recordings and the
 fold moves a lot when one recording is left out.
 
-This notebook
-1. decides the criticality from the data (coexisting orbits, and PSIS-LOO of subcritical against supercritical),
-2. fits all 7 recordings and compares μ0, a2 and μ_SN (with 90% intervals) with the paper,
-3. refits without each recording in turn, for the Bayesian fit and for point fits (MAP only, and
-   maximum likelihood as in the paper), and measures how well each predicts the held-out LCO,
-   and checks the normal form on the stable/unstable pairs without any map,
-4. regresses a third channel, the actuator command, on the normal-form state,
-5. fits the oscillation speed Ω (the paper's third stage) and predicts frequencies and time series
-   with bands.
+This notebook fits the Bayesian hybrid model on the collapsed core (`bayeshopf.posterior.fit_hybrid`):
+1. the recordings and their harmonic features,
+2. the fit: μ0, a2 and μ_SN with 90% intervals next to the paper's values, the convergence
+   diagnostics, each orbit's error, the bifurcation diagram and the phase portraits,
+3. leave-one-out refits: how well the Bayesian fit and a MAP plug-in predict the held-out LCO,
+   and a check of the normal form on the stable/unstable pairs without any map,
+4. a third channel, the actuator command, regressed on the normal-form state,
+5. the frequency of the oscillations and the time series, with bands.
 
 The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf). Set `BAYESHOPF_FLUTTER_CBC`
 to their folder, or call `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
-before starting the kernel for a quick run (short fits, two leave-one-out folds)."""),
+before starting the kernel for a quick run (short chains, two leave-one-out folds)."""),
     new_code_cell("""%matplotlib inline
 import os
 
@@ -43,98 +42,108 @@ from IPython.display import Markdown, display
 
 import bayeshopf as bh
 from bayeshopf.datasets import flutter_cbc
+from bayeshopf.diagnostics.comparison import coexisting_orbits
 from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
+from bayeshopf.features.harmonics import extract_harmonics
 from bayeshopf.inference.channels import fit_channel
-from bayeshopf.inference.speed import SpeedSettings, fit_speed
-from bayeshopf.pipeline import FitSettings, fit_auto
+from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import diagram_grid, plot_bifurcation, plot_phase_portraits
 from bayeshopf.plotting.channels import plot_channel
 from bayeshopf.plotting.pair_invariant import plot_pair_invariant
 from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
 from bayeshopf.plotting.validation import plot_leave_one_out
+from bayeshopf.posterior import fit_hybrid
 from bayeshopf.validation import leave_one_out
 
 DATA = os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc"))
-settings = FitSettings.fast() if FAST else FitSettings()
+settings = CollapsedSettings.fast() if FAST else CollapsedSettings()   # the defaults for the full run
 print(f"bayeshopf {bh.__version__}; fast mode: {FAST}")"""),
     new_markdown_cell("""## 1. The recordings
 
 Each `.mat` file holds 20 s at 5 kHz. Heave is row 1 (V, 0.18 m/V) and pitch row 4 (rad); the
 airspeed comes from `Wind_sped`, the branch from the file name. The unstable records drift slowly
-(the CBC loop keeps correcting), so every record is cut into segments of 5 periods; each segment
-gives the Fourier coefficients of R(θ), and their mean and spread over the segments enter the
-likelihood. The whole record is used, not the paper's 1.2 s."""),
+(the CBC loop keeps correcting), so every record is cut into segments of 5 periods; each segment's
+orbit is aligned in phase and expanded in K = 4 harmonics per channel in a common planar frame, and
+the mean and standard error over the segments enter the likelihood. The whole record is used, not
+the paper's 1.2 s."""),
     new_code_cell("""rs = flutter_cbc(DATA)
-from bayeshopf.features.orbits import extract_features
-
-feats = extract_features(rs)
+feats = extract_harmonics(rs, n_harmonics=settings.n_harmonics, segment_periods=settings.segment_periods)
 rows = ["| recording | μ (m/s) | branch | segments | heave p-p (mm) | frequency (Hz) |",
         "|---|---:|---|---:|---:|---:|"]
 for i, r in enumerate(rs):
     rows.append(f"| {r.name} | {r.mu:g} | {r.branch} | {feats.n_segments[i]} | "
                 f"{1e3 * feats.amplitude[i]:.1f} ± {1e3 * feats.amplitude_sd[i]:.1f} | "
-                f"{abs(feats.frequency_hz[i]):.2f} |")
+                f"{feats.frequency_hz[i]:.3f} |")
 display(Markdown("\\n".join(rows)))"""),
-    new_markdown_cell("""## 2. Criticality from the data
+    new_markdown_cell("""## 2. The fit
 
-Both normal forms are fitted to the same Fourier coefficients. The supercritical model has one LCO
-per airspeed, so it ignores the branch labels and must explain every orbit as that one LCO; the
-subcritical model puts the unstable recordings on its inner branch. PSIS-LOO (ArviZ) compares
-their expected log predictive densities. Before either model, the recordings themselves speak:
-two orbits of different size at one airspeed, each repeatable over its segments, are what a
-supercritical Hopf bifurcation (one LCO per airspeed) cannot give, and `fit_auto` decides by
-them when they exist. `bayeshopf fit DATA --criticality auto` does the same.
-
-The ELPD alone is weak here: PSIS's Pareto k exceed 0.7, and refitting each model without those
-recordings (`fit_auto(..., exact_loo=True)`, `--exact-loo`; 8 fits, so not run here) puts the two
-models 0.3 ± 7.7 apart (`benchmarks/criticality.md`): the supercritical model takes the two
-orbits at one airspeed for scatter."""),
-    new_code_cell("""result, evidence = fit_auto(rs, seed=0, settings=settings, progress=False)
-print(evidence["statement"])
-print(f"decided by: {evidence['decided_by']}")
-for p in evidence["coexisting"]:
+**Criticality.** The rig's unstable LCOs were measured by CBC (the controller stabilises them), and
+only a *subcritical* Hopf bifurcation has an unstable LCO branch, so the model is subcritical. The
+recordings say so without any model too: at 14.9 and at 16.5 m/s there are two orbits of very
+different size, each repeatable over its segments, and a supercritical Hopf bifurcation has one LCO
+per airspeed:"""),
+    new_code_cell("""for p in coexisting_orbits(feats):
     a, b = p["amplitudes"]
     print(f"{p['mu']:g} m/s: {p['recordings'][0]} {1e3 * a:.1f} mm and {p['recordings'][1]} "
-          f"{1e3 * b:.1f} mm, {p['separation']:.0f} spreads apart")
-rows = ["| model | ELPD (PSIS-LOO) | SE | max Pareto k | weight |", "|---|---:|---:|---:|---:|"]
-for name, c in evidence["compare"].items():
-    loo = evidence["loo"][name]
-    rows.append(f"| {name} | {loo['elpd']:.1f} | {loo['se']:.1f} | "
-                f"{evidence['max_pareto_k'][name]:.2f} | {c['weight']:.2f} |")
-display(Markdown("\\n".join(rows)))"""),
-    new_markdown_cell("""## 3. The fit: Hopf and fold points with intervals
-
-The posterior medians and 90% intervals, next to the paper's point estimates:"""),
-    new_code_cell("""paper = {"mu0": 17.67, "mu_fold": 14.66}
+          f"{1e3 * b:.1f} mm, {p['separation']:.0f} segment spreads apart")"""),
+    new_markdown_cell("""`fit_hybrid(rs, "subcritical")` at its default settings: a deterministic start and the MAP
+(L-BFGS), then NUTS (4 chains × 500 draws) on the few nonlinear parameters with the map's linear
+coefficients integrated out, and one exact draw of the map per posterior draw. The posterior medians
+and 90% intervals, next to the paper's point estimates:"""),
+    new_code_cell("""post = fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
+paper = {"mu0": 17.67, "mu_fold": 14.66}
 rows = ["| | median | 90% interval | paper |", "|---|---:|---|---:|"]
 for name in ("mu0", "a2", "mu_fold"):
-    iv = result.interval(name)
+    iv = post.interval(name)
     rows.append(f"| {name} | {iv.median:.2f} | [{iv.lo:.2f}, {iv.hi:.2f}] | {paper.get(name, '–')} |")
 display(Markdown("\\n".join(rows)))
-ppc = result.ppc()
-print(f"{int(ppc.covered.sum())}/{ppc.covered.size} training amplitudes inside their 90% predictive bands")
-fig = plot_bifurcation(result.diagram(diagram_grid(result)), ppc, mu_label="airspeed",
-                       mu_units="m/s", amplitude_units="m")
+print("seconds per stage: " + ", ".join(f"{k} {v:.0f}" for k, v in post.timings.items()))"""),
+    new_markdown_cell("""**Convergence.** The MAP's gradient norm, and per site NUTS's R̂ and bulk ESS (ArviZ) against
+the thresholds, and the divergent transitions. Any failed check, of convergence or of the fit, is
+listed as a warning (in fast mode the short chains fail the ESS threshold)."""),
+    new_code_cell("""d = post.diagnostics
+m, p = d["map"], d["posterior"]
+print(f"MAP: gradient norm {m['grad_norm']:.2g} after {m['steps']} L-BFGS steps "
+      f"(tolerance {m['tolerance']:g}): {'converged' if m['converged'] else 'NOT converged'}")
+rows = [f"| site | R̂ (≤ {p['r_hat_max']}) | bulk ESS (≥ {p['ess_min']}) | ok |", "|---|---:|---:|---|"]
+for name, s in p["sites"].items():
+    rows.append(f"| {name} | {s['r_hat']:.3f} | {s['ess_bulk']:.0f} | {'yes' if s['ok'] else 'no'} |")
+display(Markdown("\\n".join(rows)))
+print(f"{p['chains']} chains, {p['divergences']} divergent transitions")
+print("warnings:" + "".join(f"\\n  - {w}" for w in d["warnings"]) if d["warnings"] else "warnings: none")"""),
+    new_markdown_cell("""**Orbit error.** Each recording's posterior-median orbit against its measured mean orbit: the RMS
+distance over the orbit relative to the orbit's RMS radius, and the segments' own spread on the same
+scale. The bar is 5%, or twice the spread."""),
+    new_code_cell("""rows = ["| recording | orbit error | segment spread | within the bar |", "|---|---:|---:|---|"]
+for e in post.orbit_error():
+    rows.append(f"| {e['name']} | {100 * e['relative']:.1f}% | {100 * e['spread']:.1f}% | {'yes' if e['ok'] else 'no'} |")
+display(Markdown("\\n".join(rows)))
+ppc = post.ppc()
+print(f"{int(ppc.covered.sum())}/{ppc.covered.size} training amplitudes inside their 90% predictive bands")"""),
+    new_markdown_cell("""The diagram: posterior median, 50% and 90% bands of both branches, and (dotted) the 90% band
+of a new measurement, which includes the model error away from the recordings."""),
+    new_code_cell("""fig = plot_bifurcation(post.diagram(diagram_grid(post)), ppc, mu_label="airspeed",
+                       mu_units="m/s", amplitude_units="m", amplitude_label="heave peak-to-peak")
 display(fig)"""),
-    new_markdown_cell("""The bands are smooth between the recordings: the network that corrects the linear map has a
-learnt output scale whose prior is a tenth of the orbit size, so it cannot bend the diagram between
-data points unless the data ask for it. The phase portraits show 60 posterior orbits over the
-measured ones:"""),
-    new_code_cell("""fig = plot_phase_portraits(result.samples, result.spec, rs)
+    new_markdown_cell("""The phase portraits: 60 posterior orbits over each measured one."""),
+    new_code_cell("""fig = plot_phase_portraits(post, rs)
 display(fig)"""),
-    new_markdown_cell("""## 4. Leave-one-out: is the fit robust?
+    new_markdown_cell("""## 3. Leave-one-out: is the fit robust?
 
-Each recording is held out in turn and the model refitted on the other six. Three fits per fold:
-* **Bayesian**: posterior median and the 90% band of a new recording;
-* **MAP only**: the same model's optimum, with a plug-in band (parameters fixed, only the scatter σ);
-* **maximum likelihood**: no priors at all, the paper's approach.
+Each recording is held out in turn and the model refitted on the other six (`bayeshopf.validation`).
+Two predictions per fold, both from that fold's fit:
+* **Bayesian**: posterior median and the 90% band of a new measurement (the posterior predictive,
+  with the held-out recording's own standard errors and the model error away from the recordings);
+* **MAP plug-in**: the nonlinear parameters at the MAP and the map at its conditional mean, with a
+  plug-in band from the fitted noise scales only (no parameter uncertainty).
 
-With seven folds the coverage is coarse: the table's third column is the probability that
-calibrated 90% bands hold this few held-out recordings or fewer (binomial, as if the folds were
-independent). The figure is the paper's Fig. exp_val with bands; the star is the held-out recording (filled when
-inside the Bayesian 90% band). The last panel shows the fold of every fold."""),
+The paper's maximum-likelihood fit ran on the legacy inference core, which is gone; it is not
+repeated here. With seven folds the coverage is coarse: the table's third column is the probability
+that calibrated 90% bands hold this few held-out recordings or fewer (binomial, as if the folds were
+independent). The figure is the paper's Fig. exp_val with bands; the star is the held-out recording
+(filled when inside the Bayesian 90% band). The last panel shows the fold of every fold."""),
     new_code_cell("""folds = rs.names[2:4] if FAST else None
-loo = leave_one_out(rs, "subcritical", seed=0, settings=settings, folds=folds, keep_fits=True,
+loo = leave_one_out(feats, "subcritical", seed=0, settings=settings, folds=folds, keep_fits=True,
                     progress=False)
 rows = ["| method | held-out inside 90% | P(this few or fewer), calibrated bands | mean held-out error | max error | sd of μ_SN over folds | μ_SN range |",
         "|---|---:|---:|---:|---:|---:|---|"]
@@ -144,97 +153,85 @@ for s in loo.summary().values():
                 f"{100 * s['max_relative_error']:.1f}% | {s['mu_fold_sd']:.3f} m/s | "
                 f"{s['mu_fold_range'][0]:.2f}–{s['mu_fold_range'][1]:.2f} |")
 display(Markdown("\\n".join(rows)))
-rows = ["| held out | μ | measured (mm) | Bayesian median [90%] (mm) | MAP (mm) | ML (mm) | μ_SN Bayesian [90%] | μ_SN ML |",
-        "|---|---:|---:|---|---:|---:|---|---:|"]
+rows = ["| held out | μ | measured (mm) | Bayesian median [90%] (mm) | inside | MAP [90% plug-in] (mm) | μ_SN Bayesian [90%] | μ0 Bayesian [90%] |",
+        "|---|---:|---:|---|---|---|---|---|"]
 for r in loo.table():
-    b = r["bayes"]
+    b, m = r["bayes"], r["map"]
     rows.append(f"| {r['file']} | {r['mu']:g} | {1e3 * r['measured']:.1f} | {1e3 * b['median']:.1f} "
-                f"[{1e3 * b['ci90'][0]:.1f}, {1e3 * b['ci90'][1]:.1f}] | {1e3 * r['map']['median']:.1f} | "
-                f"{1e3 * r['ml']['median']:.1f} | {b['mu_fold']['median']:.2f} "
-                f"[{b['mu_fold']['ci90'][0]:.2f}, {b['mu_fold']['ci90'][1]:.2f}] | {r['ml']['mu_fold']['median']:.2f} |")
+                f"[{1e3 * b['ci90'][0]:.1f}, {1e3 * b['ci90'][1]:.1f}] | {'yes' if b['inside'] else 'no'} | "
+                f"{1e3 * m['median']:.1f} [{1e3 * m['ci90'][0]:.1f}, {1e3 * m['ci90'][1]:.1f}] | "
+                f"{b['mu_fold']['median']:.2f} [{b['mu_fold']['ci90'][0]:.2f}, {b['mu_fold']['ci90'][1]:.2f}] | "
+                f"{b['mu0']['median']:.2f} [{b['mu0']['ci90'][0]:.2f}, {b['mu0']['ci90'][1]:.2f}] |")
 display(Markdown("\\n".join(rows)))
-fig = plot_leave_one_out(loo, result.features)
+fig = plot_leave_one_out(loo, feats)
 display(fig)"""),
-    new_markdown_cell("""### Why the edge recordings are missed: a check without any map
+    new_markdown_cell("""### A check without any map: the stable/unstable pairs
 
-Where both LCOs of the normal form exist, `r_s² + r_u² = a2` and `r_s² r_u² = μ0 − μ`, so
-`x = (A_s A_u)²/(A_s² + A_u²)² = (μ0 − μ)/a2²` is a straight line in μ, 1/4 at the fold and 0 at
-the Hopf point. A map that is linear at each μ scales both amplitudes alike and leaves `x` as it
-is, so the measured pairs test the normal form with no map fitted (the stable amplitude at
-15.7 m/s is interpolated between 15.6 and 16.5 m/s). The line through all three pairs gives μ0,
-a2 and the fold; the dashed lines each leave one pair out and predict it (open markers)."""),
-    new_code_cell("""pairs = pair_invariants(result.features)
+Where both LCOs of the normal form `ṙ = β(μ) r + a2 r³ − r⁵` exist, `r_s² + r_u² = a2` and
+`r_s² r_u² = −β(μ)`, so `x = (A_s A_u)²/(A_s² + A_u²)² = −β(μ)/a2²`: 1/4 at the fold and 0 at the
+Hopf point. A map that is linear at each μ scales both amplitudes alike and leaves `x` as it is, so
+the measured pairs test the normal form with no map fitted (the stable amplitude at 15.7 m/s is
+interpolated between 15.6 and 16.5 m/s). With the paper's unfolding `β = μ − μ0`, `x` is a straight
+line in μ: the line through all three pairs gives μ0, a2 and the fold, and the dashed lines each
+leave one pair out and predict it (open markers). The fit uses a curved unfolding `β(μ)` (one more
+parameter, `w`), drawn in blue from its posterior."""),
+    new_code_cell("""pairs = pair_invariants(feats)
 line = invariant_line(pairs)
-rows = ["| | map-free (three pairs) | hybrid fit |", "|---|---|---|"]
+rows = ["| | map-free line (three pairs) | hybrid fit |", "|---|---|---|"]
 for name in ("mu0", "a2", "mu_fold"):
-    a, b = line.interval(name), result.interval(name)
+    a, b = line.interval(name), post.interval(name)
     rows.append(f"| {name} | {a.median:.2f} [{a.lo:.2f}, {a.hi:.2f}] | {b.median:.2f} [{b.lo:.2f}, {b.hi:.2f}] |")
 for k, held in enumerate(pairs):
     pred = invariant_line([p for i, p in enumerate(pairs) if i != k]).unstable_amplitude(held.mu, held.stable_amplitude)
     rows.append(f"| without unstable {held.mu:g} m/s | {1e3 * pred.median:.1f} [{1e3 * pred.lo:.1f}, {1e3 * pred.hi:.1f}] mm "
                 f"| measured {1e3 * held.unstable_amplitude:.1f} mm |")
 display(Markdown("\\n".join(rows)))
-display(plot_pair_invariant(pairs, fit=result))"""),
-    new_markdown_cell("""The map-free line and the hybrid fit agree on μ0, a2 and the fold. But the measured `x` falls
-faster towards the Hopf point than a straight line: from the pairs at 14.9 and 15.7 m/s the normal
-form predicts too large an unstable orbit at 16.5 m/s, with or without a map. That is the
-leave-one-out miss at 16.5 m/s above, and it belongs to the normal form's `μ − μ0`, not to the
-inference."""),
-    new_markdown_cell("""## 5. A third channel: the actuator command
+display(plot_pair_invariant(pairs, fit=post))"""),
+    new_markdown_cell("""The measured `x` falls faster towards the Hopf point than a straight line: from the pairs at 14.9
+and 15.7 m/s the straight line predicts too large an unstable orbit at 16.5 m/s, with or without a
+map. The curved unfolding bends through the pairs instead, which is why the fit's μ0 lies below the
+straight line's."""),
+    new_markdown_cell("""## 4. A third channel: the actuator command
 
-"Mapping to other coordinates": once U12 is fitted, every measured sample is placed on its
-predicted orbit (the nearest point, which inverts U12 along the LCO and gives its normal-form phase
-φ), and the actuator command is regressed on the normal-form state: a Fourier series in φ whose
-k-th harmonic is r^k (β0 + β1 μ̃), fitted across recordings by a conjugate Bayesian regression and
-repeated over draws of the map's posterior. The bands carry both uncertainties."""),
-    new_code_cell("""channel = fit_channel(result, rs, "actuator", n_draws=40 if FAST else 100)
-amp = np.array([np.nanquantile(channel.amplitude(result, [m], "unstable" if u else "stable", predictive=True)[:, 0],
-                               [0.05, 0.95]) for m, u in zip(result.features.mu, result.features.unstable, strict=True)])
+"Mapping to other coordinates": once the map is fitted, every measured sample is placed on its
+predicted orbit (the nearest point in the frame, which inverts the map along the LCO and gives its
+normal-form phase φ), and the actuator command is regressed on the fitted planar position and μ
+(`b = [1, μ̃, w1, w2, μ̃w1, μ̃w2, w1², w1w2, w2², w1³, w2³]`): the channel's and the basis' Fourier
+coefficients in φ, fitted across recordings by a conjugate Bayesian regression and repeated over
+posterior draws of the fit. The bands carry both uncertainties."""),
+    new_code_cell("""channel = fit_channel(post, rs, "actuator", n_draws=40 if FAST else 100)
+amp = np.array([np.nanquantile(channel.amplitude(post, [m], "unstable" if u else "stable", predictive=True)[:, 0],
+                               [0.05, 0.95]) for m, u in zip(feats.mu, feats.unstable, strict=True)])
 inside = (channel.measured_amplitude >= amp[:, 0]) & (channel.measured_amplitude <= amp[:, 1])
 print(f"actuator peak-to-peak inside its 90% band for {inside.sum()}/{inside.size} recordings")
-fig = plot_channel(channel, result)
+fig = plot_channel(channel, post)
 display(fig)"""),
-    new_markdown_cell("""## 6. How fast the oscillations run: the speed Ω and time series
+    new_markdown_cell("""## 5. How fast the oscillations run: frequency and time series
 
-The third training stage fits `Ω(r, θ, μ) = ω0 + NN(r, μ̃)ᵀ[1, cos θ, …, sin n_hθ]` to the measured
-time series given the map, integrating only θ̇ = Ω on each LCO (r is the closed-form radius, so the
-unstable orbits cannot drift away), from the phase that matches each record's first point. The
-speed draws are paired with the map's posterior draws, so the bands carry both uncertainties.
-
-Two bands for the frequency: the **curve** band (Ω's posterior) and the **predictive** band, which
-adds the relative scatter τ of the recordings' frequencies about the curve: where a new recording's
-frequency is expected. Besides the time series, each record's mean frequency over its whole 20 s is
-observed, with that scatter; τ is learnt with the rest of the speed model."""),
-    new_code_cell("""speed_settings = SpeedSettings(adam_steps=100, lbfgs_steps=20, svi_steps=200, n_draws=100) if FAST else SpeedSettings()
-sf = fit_speed(result, rs, seed=0, settings=speed_settings, progress=False)
-err = sf.phase_error(rs, n_periods=10.0)
-tau = np.quantile(np.asarray(sf.samples["tau_f"]), [0.5, 0.05, 0.95])
-rows = ["| recording | μ (m/s) | measured (Hz) | curve median [90%] (Hz) | predictive 90% (Hz) | inside | phase error after 10 periods (rad) |",
-        "|---|---:|---:|---|---|---|---:|"]
-n_in = 0
-for i, r in enumerate(rs):
-    f = abs(sf.data.measured_hz[i])
-    cv, pv = sf.frequency_interval(r.mu, r.branch), sf.frequency_interval(r.mu, r.branch, predictive=True)
-    n_in += pv.contains(f)
-    rows.append(f"| {r.name} | {r.mu:g} | {f:.4f} | {cv.median:.4f} [{cv.lo:.4f}, {cv.hi:.4f}] | "
-                f"[{pv.lo:.4f}, {pv.hi:.4f}] | {'yes' if pv.contains(f) else 'no'} | {err[i]:.3f} |")
+By the rotational symmetry of the normal form the phase speed depends on r and μ only, so each
+recording's frequency is one number, `ω_i = Ω(r_i, μ_i)`. The collapsed core fits `Ω` as a
+polynomial in `r̃²` and `μ̃` about the mean measured frequency, with its coefficients integrated out
+like the map's and a model error σ_ω. Two bands for the frequency: the **curve** band (Ω's
+posterior) and the **predictive** band of a new recording (adding σ_ω and the recording's standard
+error)."""),
+    new_code_cell("""rows = ["| recording | μ (m/s) | measured (Hz) | predictive median [90%] (Hz) | inside |", "|---|---:|---:|---|---|"]
+check = post.frequency_check()
+for e, mu in zip(check, feats.mu, strict=True):
+    p = e["predicted"]
+    rows.append(f"| {e['name']} | {mu:g} | {e['measured_hz']:.4f} | {p['median']:.4f} [{p['ci90'][0]:.4f}, {p['ci90'][1]:.4f}] | "
+                f"{'yes' if e['inside_ci90'] else 'no'} |")
 display(Markdown("\\n".join(rows)))
-print(f"{n_in}/{len(rs)} measured frequencies inside their 90% predictive bands; "
-      f"scatter between recordings τ = {100 * tau[0]:.2f}% [{100 * tau[1]:.2f}, {100 * tau[2]:.2f}]")"""),
+print(f"{sum(e['inside_ci90'] for e in check)}/{len(check)} measured frequencies inside their 90% predictive bands")"""),
     new_markdown_cell("""The frequency against airspeed (curve bands shaded, a new recording's band dotted, the
-recordings as markers) and the paper's Fig. ts_exp with bands: the first periods of each record,
-predicted from its first point."""),
-    new_code_cell("""grid = diagram_grid(result)
-fold_mu = result.interval("mu_fold").median
-stable_mu = grid[grid > fold_mu]
-unstable_mu = stable_mu[stable_mu < result.interval("mu0").median]
-fb = [sf.frequency_band(stable_mu, "stable"), sf.frequency_band(unstable_mu, "unstable")]
-pb = [sf.frequency_band(stable_mu, "stable", predictive=True),
-      sf.frequency_band(unstable_mu, "unstable", predictive=True)]
-meas = [(r.mu, sf.data.measured_hz[i], r.branch) for i, r in enumerate(rs)]
-display(plot_frequency(fb, meas, predictive=pb, mu_label="airspeed", mu_units="m/s"))
-bands = sf.time_series_bands(rs.subset([0, 3, 4, 6]), n_periods=3.0)
-display(plot_time_series(bands, mu_label="airspeed", mu_units="m/s"))"""),
+recordings as markers), and the paper's Fig. ts_exp with bands: the first periods of each record,
+each predicted orbit traversed at its own frequency from the recording's phase at its first sample."""),
+    new_code_cell("""grid = diagram_grid(post)
+bands = [post.frequency_band(grid, b) for b in ("stable", "unstable")]
+pred = [post.frequency_band(grid, b, predictive=True) for b in ("stable", "unstable")]
+meas = [(m, hz, "unstable" if u else "stable") for m, hz, u in zip(feats.mu, feats.frequency_hz, feats.unstable, strict=True)]
+display(plot_frequency(bands, meas, predictive=pred, mu_label="airspeed", mu_units="m/s"))
+ts = post.time_series_bands(rs, n_periods=3.0)
+display(plot_time_series([ts[i] for i in (0, 3, 4, 6)], mu_label="airspeed", mu_units="m/s"))"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={

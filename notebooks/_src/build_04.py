@@ -62,10 +62,27 @@ print(len(rs), "recordings:", ", ".join(r.name for r in rs))"""),
     new_markdown_cell("""## 2. The blind analysis
 
 Only the recordings and the simulator go in. With `hybrid=True` the Bayesian hybrid fit of the
-recordings is run too, for its Hopf and fold intervals (minutes)."""),
-    new_code_cell("""report = analyse(rs, flutter, seed=0, hybrid=not FAST, point_intervals=not FAST)
+recordings is run too (`bayeshopf.posterior.fit_hybrid`, subcritical, at the default
+`CollapsedSettings`: four NUTS chains of 500 draws; a minute or two), for Hopf and fold intervals
+that assume no simulator at all. The report records its settings and its convergence (largest R̂,
+smallest bulk ESS, divergences, and any warning of the fit's checks) under `"hybrid"`."""),
+    new_code_cell("""def show_hybrid(d):
+    h = d["hybrid"]
+    if h is None:
+        print("no hybrid fit (fast mode)")
+        return
+    c = h["convergence"]
+    print("hybrid fit: " + "; ".join(f"{k} {v['median']:.3f} [{v['ci90'][0]:.3f}, {v['ci90'][1]:.3f}]"
+                                     for k, v in (("Hopf", h["hopf"]), ("fold", h["fold"]))))
+    print(f"  {h['settings']['num_chains']} chains x {h['settings']['num_samples']} draws; "
+          f"largest R-hat {c['r_hat']:.3f}, smallest bulk ESS {c['ess_bulk']:.0f}, "
+          f"{c['divergences']} divergences; converged: {c['ok']}; {len(h['warnings'])} warning(s)")
+
+
+report = analyse(rs, flutter, seed=0, hybrid=not FAST, point_intervals=not FAST)
 d = report.to_json()
 print(d["verdict"]["sentence"])
+show_hybrid(d)
 display(Markdown(report.to_markdown()))"""),
     new_markdown_cell("""## 3. Figures
 
@@ -90,13 +107,16 @@ if not FAST:  # the fast mode skips it (tests/test_discrepancy.py covers it)
     new_markdown_cell("""## 5. The wind-tunnel recordings
 
 The 7 CBC recordings of the real rig against the `flutter3dof` simulator. There is **no ground truth**:
-what the analysis finds is a hypothesis to test on the rig, not a discovery. Skipped in fast mode or
-when the data are not available."""),
+what the analysis finds is a hypothesis to test on the rig, not a discovery. The hybrid fit of the rig
+runs at the default `CollapsedSettings`, as `bayeshopf fit` does. Skipped in fast mode or when the
+data are not available."""),
     new_code_cell("""DATA = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc")))
 if not FAST and DATA.is_dir():
     from bayeshopf.datasets import flutter_cbc
 
     real = analyse(flutter_cbc(str(DATA)), flutter, seed=0, hybrid=True)
+    print(real.to_json()["verdict"]["sentence"])
+    show_hybrid(real.to_json())
     display(Markdown(real.to_markdown()))
     display(plot_discrepancy_diagram(real))
 else:

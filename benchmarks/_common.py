@@ -1,0 +1,31 @@
+"""Helpers shared by the benchmark scripts (atomic writes, the rig's recordings)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+#: The authors' 7 CBC recordings (never committed; ../shared beside the repository).
+CBC_DIR = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" /
+           "flutter_cbc").resolve()
+
+
+def atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def rig_recordings():
+    """The 7 CBC recordings from ../shared, or ``None`` (with a message) when absent."""
+    from bayeshopf import datasets
+
+    if not CBC_DIR.is_dir():
+        print(f"benchmark: the recordings are not at {CBC_DIR}", file=sys.stderr)
+        return None
+    return datasets.flutter_cbc(CBC_DIR)
