@@ -69,7 +69,7 @@ def test_map_free_pair_invariant_of_the_rig(post):
 
     The line through the pairs assumes the paper's linear unfolding; it puts μ0
     at 17.3–17.5 m/s and predicts the unstable 16.5 m/s orbit from the pairs at
-    14.9 and 15.7 m/s too large (README, "Why the unstable 16.5 m/s orbit"). The
+    14.9 and 15.7 m/s too large (docs/validation.md, "Why the unstable 16.5 m/s orbit"). The
     fit's curved unfolding bends through all three pairs instead, so its μ0 lies
     below the line's (README, Limits): asserted here, so that a change of either
     shows.

@@ -1,4 +1,4 @@
-"""Recordings -> phase-aligned time-Fourier coefficients of their orbits in a common planar frame."""
+"""Recordings -> phase-aligned time-Fourier coefficients of their orbits in a common frame."""
 
 from bayeshopf.features.frame import PlanarFrame as PlanarFrame
 from bayeshopf.features.harmonics import HarmonicFeatures as HarmonicFeatures
