@@ -99,9 +99,8 @@ def test_criticality_from_the_data_is_subcritical(cbc_auto):
     """fit_auto: PSIS-LOO with the exact conditional density, and the coexisting orbits.
 
     Both rules agree on the rig: the ELPD alone prefers the subcritical model by
-    4.9 standard errors with fast settings (benchmarks/criticality_fast.md; default
-    settings not yet measured), and the two orbits at 16.5 m/s decide for it
-    whatever the ELPD.
+    5.1 standard errors (benchmarks/criticality.md, PSIS only), and the two orbits
+    at 16.5 m/s decide for it whatever the ELPD.
     """
     post, ev = cbc_auto
     assert post.criticality == "subcritical" and ev["preferred"] == "subcritical"
