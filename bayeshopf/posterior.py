@@ -59,7 +59,8 @@ SIGMA_REL_MAX = 0.02
 N_BAND_DRAWS = 500
 
 
-def _sign(branch: str) -> float:
+def branch_sign(branch: str) -> float:
+    """``+1`` (stable) or ``−1`` (unstable); a :class:`FitError` for any other name."""
     if branch not in ("stable", "unstable"):
         raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
     return normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
@@ -128,7 +129,7 @@ class HybridPosterior:
         """
         idx = self._draw_indices(n_draws)
         return orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                                  self.run.betas[idx], mu, _sign(branch))
+                                  self.run.betas[idx], mu, branch_sign(branch))
 
     def _noise_sd(self, coeffs, coeffs_se=None):
         """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``."""
@@ -197,7 +198,7 @@ class HybridPosterior:
         idx = self._draw_indices(n_draws)
         se = float(np.median(self.features.omega_se)) if omega_se is None else omega_se
         return frequency_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                               self.run.gammas[idx], mu, _sign(branch), predictive=predictive,
+                               self.run.gammas[idx], mu, branch_sign(branch), predictive=predictive,
                                omega_se=se, seed=self.seed)
 
     def frequency_band(self, mu, branch: str = "stable", predictive: bool = False
@@ -284,7 +285,7 @@ class HybridPosterior:
         amp_p = self._amplitude_of(ce + self._noise_sd(ce) * rng.standard_normal(c.shape))
         q, p = quantiles(amp)
         qp, _ = quantiles(amp_p)
-        return BranchBand(int(_sign(branch)), np.asarray(mu), q, p, qp)
+        return BranchBand(int(branch_sign(branch)), np.asarray(mu), q, p, qp)
 
     def diagram(self, mu=None) -> BifurcationDiagram:
         """The posterior bifurcation diagram with curve and predictive bands."""

@@ -275,7 +275,7 @@ class SavedHybrid:
         idx = bp.draw_indices(len(self.samples["gamma"]))
         theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
         f = bp.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
-                               bp._sign(branch), predictive=predictive,
+                               bp.branch_sign(branch), predictive=predictive,
                                omega_se=self.predictive_omega_se,
                                seed=int(self.summary.get("seed", 0)))[:, 0]
         f = f[np.isfinite(f)]
@@ -287,7 +287,7 @@ class SavedHybrid:
         idx = bp.draw_indices(len(self.samples["beta"]))   # the draws the summary used
         s = {k: v[idx] for k, v in self.samples.items()}
         theta = {k: v for k, v in s.items() if k not in ("beta", "gamma")}
-        c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp._sign(branch))
+        c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp.branch_sign(branch))
         if predictive:
             if self.extrapolation is not None:
                 c = bp.scale_orbits(c, bp.extrapolation_factor(

@@ -47,6 +47,7 @@ from bayeshopf.model import collapsed as cm
 from bayeshopf.posterior import (
     HybridPosterior,
     amplitude_of,
+    branch_sign,
     fit_hybrid,
     noise_sd,
     orbit_coefficients,
@@ -202,29 +203,20 @@ def map_coefficients(post: HybridPosterior, theta: dict | None = None) -> np.nda
     (:func:`~bayeshopf.model.collapsed.conditional_draw`, its second output).
     """
     th = {k: jnp.asarray(v[0]) for k, v in (theta or map_theta(post)).items()}
-    f, spec = post.features, post.spec
-    mu = jnp.asarray(f.mu)
-    sign = jnp.asarray(np.where(f.unstable, -1.0, 1.0))
-    Phi = cm.design(spec, mu, sign, th).reshape(-1, spec.n_basis)
-    sd = cm.prior_sd(spec, th["tau_mu"], th["tau_shape"])
-    coeffs = jnp.asarray(f.coeffs)
-    var = cm.error_variance(coeffs, jnp.asarray(f.coeffs_se), th["sigma"], th["sigma_rel"])
-    zero = jnp.zeros(spec.n_basis)
-    cols = [cm.conditional_draw(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd, zero)[1]
-            for c in range(2)]
-    return np.asarray(jnp.stack(cols, axis=-1))
+    f = post.features
+    return np.asarray(cm.map_mean(post.spec, th, jnp.asarray(f.mu),
+                                  jnp.asarray(np.where(f.unstable, -1.0, 1.0)),
+                                  jnp.asarray(f.coeffs), jnp.asarray(f.coeffs_se)))
 
 
 def plug_in_coefficients(post: HybridPosterior, mu, branch: str) -> np.ndarray:
     """Harmonic coefficients of the MAP plug-in orbit at μ, ``(n_mu, 2, 2K+1)``; ``nan``: no LCO."""
-    if branch not in ("stable", "unstable"):
-        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    sign = branch_sign(branch)
     if branch == "unstable" and post.criticality != "subcritical":
         return np.full((np.size(mu), 2, 2 * post.spec.n_harmonics + 1), np.nan)
     theta = map_theta(post)
     beta = map_coefficients(post, theta)
-    return orbit_coefficients(post.spec, theta, beta[None], np.atleast_1d(mu),
-                              1.0 if branch == "stable" else -1.0)[0]
+    return orbit_coefficients(post.spec, theta, beta[None], np.atleast_1d(mu), sign)[0]
 
 
 def plug_in_amplitude(post: HybridPosterior, mu, branch: str = "stable") -> np.ndarray:

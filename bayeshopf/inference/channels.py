@@ -38,7 +38,7 @@ import numpy as np
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import FitError
 from bayeshopf.model import collapsed as cm
-from bayeshopf.model import normal_form
+from bayeshopf.posterior import branch_sign
 
 #: Phases on which the predicted orbit is searched for the nearest point.
 N_PHASE_GRID = 720
@@ -94,7 +94,7 @@ class ChannelFit:
             seed: Seed of the misfit draws.
         """
         phi = np.linspace(0.0, 2.0 * np.pi, n_phi, endpoint=False)
-        b = _basis_along_orbits(post, self.draw_index, mu, _sign(branch), phi)  # (d, n_phi, p)
+        b = _basis_along_orbits(post, self.draw_index, mu, branch_sign(branch), phi)  # (d, n, p)
         y = np.einsum("dnp,dp->dn", b, self.beta)
         if predictive:
             rng = np.random.default_rng(seed)
@@ -131,37 +131,25 @@ def _basis(w, mu_t):
                      axis=-1)
 
 
-_FNS: dict[int, tuple] = {}
+_PHASE_GRID = np.linspace(0.0, 2.0 * np.pi, N_PHASE_GRID, endpoint=False)
 
 
-def _jitted(spec: cm.CollapsedSpec):
-    """``(basis along orbits, nearest phase)`` for draws ``(θ, β)``, compiled once per spec."""
-    hit = _FNS.get(id(spec))
-    if hit is not None and hit[0] is spec:
-        return hit[1]
-    phi_grid = jnp.linspace(0.0, 2.0 * jnp.pi, N_PHASE_GRID, endpoint=False)
+def _basis_along(spec: cm.CollapsedSpec, theta, betas, mu, sign, phi):
+    """``b`` along each draw's orbit at μ (``lax.map``: batched algebra is slow on CPU)."""
+    return jax.lax.map(lambda a: _basis(cm.orbit(spec, a[0], a[1], mu, sign, phi),
+                                        spec.mu_tilde(mu)), (theta, betas))
 
-    def orbit(t, b, mu, sign, phi):
-        return cm.orbit(spec, t, b, mu, sign, phi)                  # (n_phi, 2)
 
-    def basis_along(theta, betas, mu, sign, phi):
-        return jax.lax.map(lambda a: _basis(orbit(a[0], a[1], mu, sign, phi), spec.mu_tilde(mu)),
-                           (theta, betas))
+def _nearest_phase(spec: cm.CollapsedSpec, theta, betas, mu, sign, w):
+    """Per draw, the grid phase whose orbit point is nearest each sample ``w``."""
+    grid = jnp.asarray(_PHASE_GRID)
 
-    def nearest_phase(theta, betas, mu, sign, w):
-        def one(a):
-            o = orbit(a[0], a[1], mu, sign, phi_grid)
-            d2 = jnp.sum((w[:, None, :] - o[None]) ** 2, axis=-1)
-            return phi_grid[jnp.argmin(d2, axis=-1)]
+    def one(a):
+        o = cm.orbit(spec, a[0], a[1], mu, sign, grid)
+        d2 = jnp.sum((w[:, None, :] - o[None]) ** 2, axis=-1)
+        return grid[jnp.argmin(d2, axis=-1)]
 
-        # lax.map over draws: XLA's batched linear algebra is slow on CPU
-        return jax.lax.map(one, (theta, betas))
-
-    fns = (jax.jit(basis_along), jax.jit(nearest_phase))
-    if len(_FNS) > 16:
-        _FNS.clear()
-    _FNS[id(spec)] = (spec, fns)
-    return fns
+    return jax.lax.map(one, (theta, betas))
 
 
 def _draws(post, idx) -> tuple[dict, jnp.ndarray]:
@@ -169,17 +157,11 @@ def _draws(post, idx) -> tuple[dict, jnp.ndarray]:
     return theta, jnp.asarray(post.run.betas[idx])
 
 
-def _sign(branch: str) -> float:
-    if branch not in ("stable", "unstable"):
-        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
-    return normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
-
-
 def _basis_along_orbits(post, idx, mu, sign, phi) -> np.ndarray:
     """``b`` along each draw's predicted orbit at μ, ``(n_draws, n_phi, len(BASIS))``."""
     theta, betas = _draws(post, idx)
-    return np.asarray(_jitted(post.spec)[0](theta, betas, jnp.asarray(mu, float),
-                                            jnp.asarray(sign, float), jnp.asarray(phi)))
+    return np.asarray(cm._jitted(post.spec, _basis_along)(
+        theta, betas, jnp.asarray(mu, float), jnp.asarray(sign, float), jnp.asarray(phi)))
 
 
 def _regression_draw(x, y, rng):
@@ -246,7 +228,7 @@ def fit_channel(
     mu0 = np.asarray(post.samples["mu0"])
     idx = np.sort(rng.choice(mu0.size, size=min(n_draws, mu0.size), replace=False))
     theta, betas = _draws(post, idx)
-    find = _jitted(post.spec)[1]
+    find = cm._jitted(post.spec, _nearest_phase)
     n_c = 2 * n_harmonics + 1
     phi_grid = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
     proj = np.linalg.pinv(_fourier(phi_grid, n_harmonics))  # grid values -> coefficients

@@ -562,17 +562,26 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
             theta, sigma_omega, mu, sign, omega, omega_se))
 
 
-def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
-    """One exact draw of the map's coefficients ``β`` (J, 2) given one draw ``θ``."""
+def _map_conditional(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, eps):
+    """Draws (from standard-normal ``eps`` (2, J)) and means of ``β | y, θ``, each (J, 2)."""
     Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
     sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
-    eps = jax.random.normal(key, (2, spec.n_basis))
     var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
-    betas = []
-    for c in range(2):
-        d = var[:, c].reshape(-1)
-        betas.append(conditional_draw(Phi, coeffs[:, c].reshape(-1), d, sd, eps[c])[0])
-    return jnp.stack(betas, axis=-1)
+    pairs = [conditional_draw(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd, eps[c])
+             for c in range(2)]
+    return (jnp.stack([d for d, _ in pairs], axis=-1), jnp.stack([m for _, m in pairs], axis=-1))
+
+
+def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
+    """One exact draw of the map's coefficients ``β`` (J, 2) given one draw ``θ``."""
+    eps = jax.random.normal(key, (2, spec.n_basis))
+    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps)[0]
+
+
+def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se):
+    """``E[β | y, θ]`` (J, 2): the map's coefficients at their conditional mean."""
+    eps = jnp.zeros((2, spec.n_basis))
+    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps)[1]
 
 
 def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, key):
