@@ -3,10 +3,12 @@
 The data flow one way: recordings -> phase-aligned harmonic features -> model
 (normal form, map and frequency integrated out) -> inference (start, MAP, NUTS
 or SVI) -> diagnostics and posterior predictive -> plots.
+
+Importing bayeshopf leaves JAX's configuration alone; its computing functions
+switch on JAX's float64 mode when they run (:func:`ensure_x64`).
 """
 
-import jax
+from bayeshopf._x64 import ensure_x64
 
-jax.config.update("jax_enable_x64", True)
-
+__all__ = ["ensure_x64"]
 __version__ = "0.1.0"

@@ -21,11 +21,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand
 from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand, quantiles
+from bayeshopf.diagnostics.bifurcation import levels as band_levels
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
-from bayeshopf.diagnostics.summaries import Interval, interval
+from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import (
     HarmonicFeatures,
@@ -201,14 +203,14 @@ class HybridPosterior:
                                self.run.gammas[idx], mu, branch_sign(branch), predictive=predictive,
                                omega_se=se, seed=self.seed)
 
-    def frequency_band(self, mu, branch: str = "stable", predictive: bool = False
-                       ) -> FrequencyBand:
-        """Median and 90% band of the frequency (Hz) on a μ grid.
+    def frequency_band(self, mu, branch: str = "stable", predictive: bool = False,
+                       ci: float = CI) -> FrequencyBand:
+        """Median and ``ci`` band (90% by default) of the frequency (Hz) on a μ grid.
 
         ``nan`` where fewer than half the draws have the branch.
         """
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive))
+        return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive), ci)
 
     def time_series(self, mu: float, branch: str, t, phase0: float = 0.0,
                     n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
@@ -226,8 +228,8 @@ class HybridPosterior:
         return self.spec.frame.from_frame(np.einsum("ntk,nck->ntc", X, c))
 
     def time_series_bands(self, recordings: RecordingSet, n_periods: float = 4.0,
-                          channel: int = 0) -> list[TimeSeriesBand]:
-        """Median and 90% band of one channel over the first ``n_periods`` of each recording.
+                          channel: int = 0, ci: float = CI) -> list[TimeSeriesBand]:
+        """Median and ``ci`` band (90%) of a channel over the first ``n_periods`` of each recording.
 
         Each prediction starts at the recording's phase at its first sample (the
         crest of z1's fundamental, fitted over the window at the measured
@@ -246,7 +248,7 @@ class HybridPosterior:
             ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
             phase0 = -float(np.arctan2(ab[2], ab[1]))
             pred = self.time_series(r.mu, r.branch, t[sel], phase0)[..., channel]
-            q = np.nanquantile(pred, [0.5, 0.05, 0.95], axis=0)
+            q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
             name = recordings.planar[channel]
             out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], t[sel],
                                       z[sel, channel], q[0], q[1], q[2]))
@@ -277,32 +279,47 @@ class HybridPosterior:
         pad = 0.05 * (hi - lo)
         return np.linspace(lo - pad, hi + pad, n)
 
-    def _band(self, mu, branch) -> BranchBand:
+    def _band(self, mu, branch, ci: float = CI) -> BranchBand:
+        at = band_levels(ci)
         c = self.orbit_coefficients(mu, branch)
         amp = self._amplitude_of(c)
         rng = np.random.default_rng(self.seed)
         ce = self._away_from_data(c, mu, branch)
         amp_p = self._amplitude_of(ce + self._noise_sd(ce) * rng.standard_normal(c.shape))
-        q, p = quantiles(amp)
-        qp, _ = quantiles(amp_p)
-        return BranchBand(int(branch_sign(branch)), np.asarray(mu), q, p, qp)
+        q, p = quantiles(amp, at)
+        qp, _ = quantiles(amp_p, at)
+        to_hopf = p_to_hopf = None
+        sub = self.criticality == "subcritical"
+        if sub == (branch == "unstable"):      # this branch shrinks into the Hopf point
+            mu0 = np.asarray(self.samples["mu0"])[self._draw_indices(N_BAND_DRAWS)][:, None]
+            past = (np.asarray(mu)[None] > mu0) if sub else (np.asarray(mu)[None] < mu0)
+            to_hopf, p_to_hopf = quantiles(np.where(np.isnan(amp) & past, 0.0, amp), at)
+        return BranchBand(int(branch_sign(branch)), np.asarray(mu), q, p, qp, at, to_hopf,
+                          p_to_hopf)
 
-    def diagram(self, mu=None) -> BifurcationDiagram:
-        """The posterior bifurcation diagram with curve and predictive bands."""
+    def diagram(self, mu=None, ci: float = CI) -> BifurcationDiagram:
+        """The posterior bifurcation diagram with curve and predictive bands.
+
+        Args:
+            mu: μ grid (default :meth:`default_mu_grid`).
+            ci: Mass of the outer bands and of the Hopf and fold intervals
+                (the 50% band and the median are always stored).
+        """
         mu = self.default_mu_grid() if mu is None else np.asarray(mu, float)
-        stable = self._band(mu, "stable")
+        stable = self._band(mu, "stable", ci)
         if self.criticality == "subcritical":
-            unstable = self._band(mu, "unstable")
+            unstable = self._band(mu, "unstable", ci)
             idx = self._draw_indices(N_BAND_DRAWS)
             c = orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
                                    self.run.betas[idx], self.samples["mu_fold"][idx][:, None],
                                    normal_form.STABLE, per_draw=True)
             fold_amp = self._amplitude_of(c)[:, 0]
-            fold = interval(self.samples["mu_fold"])
-            fold_iv = interval(fold_amp)
+            fold = interval(self.samples["mu_fold"], ci)
+            fold_iv = interval(fold_amp, ci)
         else:
             unstable, fold, fold_iv = None, None, None
-        return BifurcationDiagram(stable, unstable, interval(self.samples["mu0"]), fold, fold_iv)
+        return BifurcationDiagram(stable, unstable, interval(self.samples["mu0"], ci), fold,
+                                  fold_iv)
 
     @cached_property
     def training_coefficients(self) -> tuple[np.ndarray, ...]:
@@ -315,8 +332,12 @@ class HybridPosterior:
             self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
             for i in range(f.n_recordings))
 
-    def ppc(self) -> PosteriorPredictiveCheck:
-        """Posterior predictive check of each training recording (amplitudes and coefficients)."""
+    def ppc(self, ci: float = CI) -> PosteriorPredictiveCheck:
+        """Posterior predictive check of each training recording (amplitudes and coefficients).
+
+        Args:
+            ci: Mass of the amplitude intervals (90% by default).
+        """
         f = self.features
         curve, pred, p_amp = [], [], []
         reps = []
@@ -325,8 +346,8 @@ class HybridPosterior:
             rep = c + self._noise_sd(c, f.coeffs_se[i]) * rng.standard_normal(c.shape)
             reps.append(rep)
             a, ap = self._amplitude_of(c), self._amplitude_of(rep)
-            curve.append(interval(a))
-            pred.append(interval(ap))
+            curve.append(interval(a, ci))
+            pred.append(interval(ap, ci))
             p_amp.append(float(np.mean(ap[np.isfinite(ap)] <= f.amplitude[i])))
         reps = np.array(reps)                                   # (n_rec, n, 2, 2K+1)
         flat = reps.reshape(reps.shape[0], reps.shape[1], -1)
@@ -336,7 +357,8 @@ class HybridPosterior:
         return PosteriorPredictiveCheck(
             names=f.names, mu=f.mu, unstable=f.unstable, measured=f.amplitude,
             curve=tuple(curve), predictive=tuple(pred), amplitude_p=np.array(p_amp),
-            coeff_p=coeff_p, coeff_z=coeff_z)
+            coeff_p=coeff_p, coeff_z=coeff_z,
+            measured_se=f.amplitude_sd / np.sqrt(np.maximum(f.n_segments, 1)))
 
     @cached_property
     def log_likelihood(self) -> np.ndarray:
@@ -352,6 +374,82 @@ class HybridPosterior:
                  if k in self.map_point.params}
         ll = log_likelihood_draws(self.spec, theta, self.features)
         return ll.reshape(shape + (self.features.n_recordings,))
+
+    def to_inference_data(self):
+        """The fit as ArviZ :class:`~arviz.InferenceData` (ArviZ 0.x; see below).
+
+        Groups, each with chains and draws as NUTS gave them:
+
+        * ``posterior``: every site (``mu0``, ``a2``, ``mu_fold``, ``sigma`` over
+          ``frame_axis``, …), the map's coefficients ``beta`` over
+          ``(basis, frame_axis)`` and, with the frequency model, ``gamma`` over
+          ``frequency_basis``;
+        * ``log_likelihood``: ``y``, each recording's ``log p(y_i | y_{−i}, θ)``
+          over ``recording`` (:attr:`log_likelihood`; ``az.loo`` reads it);
+        * ``posterior_predictive``: a replicated recording at each training
+          recording's μ and branch, per draw: ``amplitude`` (peak-to-peak of z1),
+          ``coeffs`` (its harmonic coefficients in the frame) and, with the
+          frequency model, ``frequency`` (Hz) (:func:`predictive_draws`);
+        * ``observed_data``: the measured ``amplitude``, ``coeffs`` and ``frequency``
+          with the same coordinates;
+        * ``constant_data``: ``mu``, ``unstable`` (1 for the unstable branch),
+          ``coeffs_se``, ``amplitude_sd``, ``n_segments``, ``segment_rms``,
+          ``frequency_se`` (Hz) of each recording.
+
+        Coordinates: ``recording`` (names), ``frame_axis`` (``w1``, ``w2``, with
+        the planar ``channel`` each follows: z = centre + L w with L lower
+        triangular), ``coefficient`` (``a0, a1…aK, b1…bK``, with its
+        ``harmonic``), ``basis`` and ``frequency_basis``. The attributes hold the
+        criticality, the seed, μ's name and unit, the channels' units and the
+        package version. There is no ``sample_stats`` group: the sampler's
+        per-draw statistics are not kept (the divergence count is in
+        :attr:`diagnostics`).
+
+        bayeshopf needs Python 3.11 and ArviZ 0.x (``arviz<0.24``); ArviZ 1.x
+        needs Python ≥ 3.12 and replaces ``InferenceData`` with xarray's
+        ``DataTree``. The file :func:`~bayeshopf.report.save_hybrid` writes is
+        this object (``posterior.nc``).
+        """
+        import bayeshopf
+        from bayeshopf.diagnostics import arviz_io
+
+        f, run = self.features, self.run
+        chains = {k: np.asarray(v) for k, v in run.chains.items() if not k.startswith("marginal")}
+        shape = next(iter(chains.values())).shape[:2]
+        chains["beta"] = np.asarray(run.betas).reshape(shape + run.betas.shape[1:])
+        if run.gammas is not None:
+            chains["gamma"] = np.asarray(run.gammas).reshape(shape + run.gammas.shape[1:])
+        pred = predictive_draws(self.spec, self.theta, run.betas, run.gammas, f, self.seed)
+        pred = {k: v.reshape(shape + v.shape[1:]) for k, v in pred.items()}
+        observed = {"amplitude": f.amplitude, "coeffs": f.coeffs}
+        if self.has_frequency:
+            observed["frequency"] = f.frequency_hz
+        K = self.spec.n_harmonics
+        rec, coef = ["recording"], ["recording", "frame_axis", "coefficient"]
+        dims = {"sigma": ["frame_axis"], "beta": ["basis", "frame_axis"],
+                "gamma": ["frequency_basis"], "y": rec, "amplitude": rec, "frequency": rec,
+                "coeffs": coef, "coeffs_se": coef, "mu": rec, "unstable": rec,
+                "amplitude_sd": rec, "n_segments": rec, "segment_rms": rec, "frequency_se": rec}
+        coords = {"recording": list(f.names), "frame_axis": ["w1", "w2"],
+                  "coefficient": ["a0", *(f"a{k}" for k in range(1, K + 1)),
+                                  *(f"b{k}" for k in range(1, K + 1))],
+                  "basis": _basis_names(self.spec, run.betas.shape[1]),
+                  "frequency_basis": [f"g{j}" for j in range(
+                      0 if run.gammas is None else run.gammas.shape[1])]}
+        extra = {"channel": ("frame_axis", list(self.spec.frame.names)),
+                 "harmonic": ("coefficient", [0, *range(1, K + 1), *range(1, K + 1)])}
+        constant = {"mu": f.mu, "unstable": f.unstable.astype(int), "coeffs_se": f.coeffs_se,
+                    "amplitude_sd": f.amplitude_sd, "n_segments": f.n_segments,
+                    "segment_rms": f.segment_rms, "frequency_se": f.omega_se / (2 * np.pi)}
+        attrs = {"criticality": self.criticality, "seed": self.seed, "mu_label": self.mu_label,
+                 "mu_units": self.mu_units, "amplitude_units": self.amplitude_units,
+                 "planar_channels": list(self.spec.frame.names),
+                 "channel_units": list(self.spec.frame.units),
+                 "inference": run.method, "bayeshopf_version": bayeshopf.__version__}
+        return arviz_io.chains_to_inference_data(
+            chains, log_likelihood={"y": self.log_likelihood}, posterior_predictive=pred,
+            observed=observed, constant=constant, coords=coords, dims=dims,
+            extra_coords=extra, attrs=attrs)
 
     def orbit_error(self) -> list[dict]:
         """Each recording's posterior-median orbit against its measured mean orbit.
@@ -431,6 +529,7 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
         sign: +1 stable, −1 unstable.
         per_draw: Whether ``mu`` holds one row of μ per draw.
     """
+    ensure_x64()
     n = np.shape(betas)[0]
     mu = np.asarray(mu, dtype=float)
     mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
@@ -447,6 +546,7 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     ``N(0, σ_ω² + omega_se²)`` (rad/s): one standard-normal number per draw for
     every μ, so that a band over μ is smooth while each μ's marginal is exact.
     """
+    ensure_x64()
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
     th = {k: np.asarray(v)[:, None] for k, v in theta.items() if np.ndim(v) == 1}
     om = np.asarray(cm.frequency(spec, th, np.asarray(gammas)[:, None, :], mu, float(sign)))
@@ -483,6 +583,49 @@ def scale_orbits(coeffs, factor) -> np.ndarray:
     c = np.array(coeffs, dtype=float, copy=True)
     c[..., 1:] *= np.asarray(factor)[..., None, None]
     return c
+
+
+def _basis_names(spec: cm.CollapsedSpec, n: int) -> list[str]:
+    """The map's ``n`` basis functions' names (``"u1^2 m"``, ``"nn3"``, …), or ``psi0…``."""
+    names = cm.basis_names(spec)
+    return names if len(names) == n and len(set(names)) == n else [f"psi{j}" for j in range(n)]
+
+
+def predictive_draws(spec: cm.CollapsedSpec, theta: dict, betas, gammas,
+                     features: HarmonicFeatures, seed: int) -> dict:
+    """A replicated recording at each training recording, one per posterior draw.
+
+    At recording ``i``'s μ and branch, each draw's predicted coefficients plus
+    ``N(0, se_i² + σ_c² + (σ_rel c)²)`` noise (``se_i`` its standard errors,
+    as in :meth:`HybridPosterior.ppc`) and, with ``gammas``, its frequency plus
+    ``N(0, σ_ω² + se_ω,i²)``; the noise is independent between recordings.
+
+    Returns:
+        ``{"coeffs": (n, n_rec, 2, 2K+1), "amplitude": (n, n_rec)}`` and, with
+        ``gammas``, ``"frequency"`` (Hz) ``(n, n_rec)``; ``nan`` where a draw has
+        no LCO on the recording's branch.
+    """
+    f = features
+    n = np.shape(betas)[0]
+    rng = np.random.default_rng([seed, 2])
+    coeffs = np.full((n, f.n_recordings, 2, 2 * spec.n_harmonics + 1), np.nan)
+    freq = np.full((n, f.n_recordings), np.nan)
+    for unstable in (False, True):
+        idx = np.flatnonzero(f.unstable == unstable)
+        if idx.size == 0:
+            continue
+        sign = normal_form.UNSTABLE if unstable else normal_form.STABLE
+        coeffs[:, idx] = orbit_coefficients(spec, theta, betas, f.mu[idx], sign)
+        if gammas is not None:
+            freq[:, idx] = frequency_draws(spec, theta, gammas, f.mu[idx], sign)
+    sd = np.stack([noise_sd(coeffs[:, i], theta["sigma"], theta["sigma_rel"], f.coeffs_se[i])
+                   for i in range(f.n_recordings)], axis=1)
+    reps = coeffs + sd * rng.standard_normal(coeffs.shape)
+    out = {"coeffs": reps, "amplitude": amplitude_of(spec, reps)}
+    if gammas is not None:
+        sd_omega = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + f.omega_se[None] ** 2)
+        out["frequency"] = freq + sd_omega / (2 * np.pi) * rng.standard_normal(freq.shape)
+    return out
 
 
 def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
@@ -670,6 +813,7 @@ def fit_hybrid(
     Returns:
         A :class:`HybridPosterior` with its ``diagnostics``.
     """
+    ensure_x64()
     settings = settings or ci.CollapsedSettings()
     if compilation_cache:
         enable_compilation_cache()
@@ -715,6 +859,7 @@ def fit_auto(
         :func:`~bayeshopf.diagnostics.comparison.compare_criticality` with
         ``branch_labels`` added.
     """
+    ensure_x64()
     from dataclasses import replace
 
     from bayeshopf.diagnostics.comparison import compare_criticality

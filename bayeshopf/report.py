@@ -5,10 +5,19 @@ A fit folder holds
 * ``summary.json``: μ0, a2 and μ_fold (median and 90% interval), the
   criticality, the amplitude unit, and every recording's measured and
   predicted amplitude, plus settings and stage timings;
-* ``posterior.nc``: the posterior draws as ArviZ InferenceData (netCDF), with
-  each recording's leave-one-out log-likelihood as its ``log_likelihood`` group;
-* ``model.json``: the model structure (:class:`CollapsedSpec`), enough to predict;
-* ``figures/*.png``.
+* ``posterior.nc``: the fit as ArviZ InferenceData (netCDF,
+  :meth:`~bayeshopf.posterior.HybridPosterior.to_inference_data`): the posterior
+  draws, each recording's leave-one-out log-likelihood (``az.loo`` reads it),
+  a replicated recording per draw (posterior predictive), the measured
+  amplitudes and features, with coordinates;
+* ``model.json``: the model structure (:class:`CollapsedSpec`) and the MAP
+  point, enough to predict and to draw every figure again;
+* ``figures/*.png`` (or ``.pdf``/``.svg``: :func:`redraw_figures`, ``bayeshopf plot``).
+
+:func:`load_fit` reads a folder back: :class:`SavedHybrid` predicts, and its
+:attr:`SavedHybrid.posterior` is the :class:`~bayeshopf.posterior.HybridPosterior`
+again (diagram, predictive check, frequency; the phase portraits and time
+series with the recordings), without refitting.
 
 Every file is written to a staging folder first and moved into place with
 ``os.replace``, so an interrupted run never leaves a half-written file, and a
@@ -24,13 +33,15 @@ import shutil
 import tempfile
 import time
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 import bayeshopf
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics import arviz_io
-from bayeshopf.diagnostics.summaries import Interval, interval
+from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import DataError, OutputError
 from bayeshopf.model.collapsed import CollapsedSpec
 
@@ -117,9 +128,16 @@ def _staged(out, force: bool, write) -> Path:
 COLLAPSED_CORE = "collapsed"
 
 
-def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
-    """The ``summary.json`` content of a :class:`~bayeshopf.posterior.HybridPosterior`."""
-    ppc = post.ppc() if ppc is None else ppc
+def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) -> dict:
+    """The ``summary.json`` content of a :class:`~bayeshopf.posterior.HybridPosterior`.
+
+    ``ci`` is the mass of the intervals of μ0, a2, the fold and each
+    recording's predicted amplitude (keys ``ci90`` at the default 0.9, ``ci95``
+    at 0.95, …; ``ppc`` must be at the same level). The convergence and fit
+    checks in ``diagnostics`` stay at 90%.
+    """
+    ppc = post.ppc(ci) if ppc is None else ppc
+    inside = f"inside_ci{round(100 * ppc.ci)}"
     diag = post.diagnostics
     errors = {e["name"]: e for e in diag["fit"]["orbit_error"]}
     f = post.features
@@ -132,7 +150,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
             "amplitude": float(f.amplitude[i]), "amplitude_sd": float(f.amplitude_sd[i]),
             "n_segments": int(f.n_segments[i]),
             "predicted": ppc.predictive[i].to_json(), "curve": ppc.curve[i].to_json(),
-            "inside_ci90": bool(ppc.covered[i]),
+            inside: bool(ppc.covered[i]),
             "frequency_hz": float(f.frequency_hz[i]),
             "frequency_predicted": freq[i]["predicted"] if freq else None,
             "frequency_inside_ci90": freq[i]["inside_ci90"] if freq else None,
@@ -140,7 +158,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
         })
 
     def iv(name):
-        v = post.interval(name)
+        v = post.interval(name, ci)
         return None if v is None else v.to_json()
 
     out = {
@@ -155,11 +173,11 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
         "planar_channels": list(post.spec.frame.names),
         "recordings": recs,
         "orbit_error": [errors[n] for n in f.names],
-        "ppc": {"amplitudes_inside_ci90": int(ppc.covered.sum()),
+        "ppc": {f"amplitudes_{inside}": int(ppc.covered.sum()),
                 "frequencies_inside_ci90": (sum(e["inside_ci90"] for e in freq)
                                             if freq else None),
                 "n_recordings": int(ppc.covered.size),
-                "coefficients_inside_ci90": ppc.coeff_coverage},
+                f"coefficients_{inside}": ppc.coeff_coverage},
         "map": {k: _finite_or_none(float(np.asarray(post.map_point.params[k])))
                 for k in ("mu0", "a2", "a4", "mu_fold", "w_unfold")
                 if k in post.map_point.params},
@@ -168,6 +186,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
         "settings": dict(post.settings.__dict__),
         "n_draws": int(np.shape(post.samples["mu0"])[0]),
         "timings_s": {k: round(v, 3) for k, v in post.timings.items()},
+        "ci": ci,
         "bayeshopf_version": bayeshopf.__version__,
     }
     if extra:
@@ -176,14 +195,16 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None) -> dict:
 
 
 def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figures=None,
-                ppc=None, extra_summary: dict | None = None) -> Path:
+                ppc=None, extra_summary: dict | None = None, ci: float = CI) -> Path:
     """Write a fit folder atomically.
 
-    ``posterior.nc`` holds the draws by chain of every site, the map's
-    coefficients ``beta`` and the frequency's ``gamma`` (one exact draw per
-    posterior draw), and, as its ``log_likelihood`` group, each recording's
-    ``log p(y_i | y_{−i}, θ)`` (for ``az.loo``); ``model.json`` the model
-    structure and the predictive standard errors of a new recording.
+    ``posterior.nc`` is :meth:`~bayeshopf.posterior.HybridPosterior.to_inference_data`:
+    the draws by chain of every site, the map's coefficients ``beta`` and the
+    frequency's ``gamma`` (one exact draw per posterior draw), each recording's
+    ``log p(y_i | y_{−i}, θ)`` as the ``log_likelihood`` group (for ``az.loo``),
+    the posterior predictive and observed amplitudes and features, with
+    coordinates; ``model.json`` the model structure, the MAP point and the
+    predictive standard errors of a new recording.
 
     Args:
         post: The :class:`~bayeshopf.posterior.HybridPosterior`.
@@ -191,8 +212,9 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         force: Replace bayeshopf's files in a non-empty folder (others are kept).
         figures: Optional callable ``figures(folder) -> list[Path]`` that draws
             the figures into a folder (its time is recorded in the summary).
-        ppc: The posterior predictive check, if already computed.
+        ppc: The posterior predictive check, if already computed (at level ``ci``).
         extra_summary: More keys for ``summary.json``.
+        ci: Mass of the summary's intervals (:func:`summary_hybrid`).
 
     Returns:
         The output folder.
@@ -200,32 +222,20 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
     def write(stage: Path) -> None:
         nonlocal post
         post = replace(post, timings={**post.timings, **_draw_figures(figures, stage)})
-        _write_json(summary_hybrid(post, ppc, extra_summary), stage / SUMMARY)
+        _write_json(summary_hybrid(post, ppc, extra_summary, ci), stage / SUMMARY)
+        mp = post.map_point
         model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
                  "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),
                  "predictive_omega_se": float(np.median(post.features.omega_se)),
                  "extrapolation": _extrapolation_data(post),
-                 "seed": post.seed}
+                 "seed": post.seed,
+                 "map": {"params": {k: np.asarray(v, float).tolist()
+                                    for k, v in mp.params.items()},
+                         "grad_norm": float(mp.grad_norm), "converged": bool(mp.converged),
+                         "steps": int(mp.n_steps), "log_joint": float(mp.log_joint)},
+                 "divergences": int(post.run.divergences)}
         _write_json(model, stage / MODEL)
-        chains = {k: v for k, v in post.run.chains.items() if not k.startswith("marginal")}
-        n_chain, n_draw = next(iter(chains.values())).shape[:2]
-        chains["beta"] = post.run.betas.reshape((n_chain, n_draw) + post.run.betas.shape[1:])
-        if post.run.gammas is not None:
-            chains["gamma"] = post.run.gammas.reshape((n_chain, n_draw) + post.run.gammas.shape[1:])
-        idata = arviz_io.chains_to_inference_data(
-            chains,
-            log_likelihood={"y": post.log_likelihood},
-            dims={"y": ["recording"], "coeffs": ["recording", "frame_axis", "coefficient"],
-                  "coeffs_se": ["recording", "frame_axis", "coefficient"],
-                  "mu": ["recording"], "unstable": ["recording"]},
-            coords={"recording": list(post.features.names), "frame_axis": ["w1", "w2"]},
-            observed={"coeffs": post.features.coeffs},
-            constant={"mu": post.features.mu, "unstable": post.features.unstable.astype(int),
-                      "coeffs_se": post.features.coeffs_se},
-            attrs={"criticality": post.criticality, "seed": post.seed,
-                   "bayeshopf_version": bayeshopf.__version__},
-        )
-        arviz_io.write_netcdf(idata, stage / POSTERIOR)
+        arviz_io.write_netcdf(post.to_inference_data(), stage / POSTERIOR)
 
     return _staged(out, force, write)
 
@@ -242,6 +252,12 @@ def _extrapolation_data(post) -> dict | None:
 class SavedHybrid:
     """A collapsed-core fit read back from its folder.
 
+    It predicts (:meth:`predict`, :meth:`frequency`, :meth:`p_exists`) from the
+    draws alone; :attr:`posterior` rebuilds the
+    :class:`~bayeshopf.posterior.HybridPosterior` from the saved draws,
+    features and MAP point, so every summary and figure of the fit is drawn
+    again without refitting (:meth:`diagram`, :meth:`ppc`, :meth:`plot`).
+
     Attributes:
         folder: Where it was read from.
         spec: The model structure.
@@ -252,6 +268,7 @@ class SavedHybrid:
         extrapolation: Training μ of each branch (``mu_stable``, ``mu_unstable``)
             for the model error away from the recordings; ``None`` when the fit
             had it off.
+        model: The content of ``model.json``.
     """
 
     folder: Path
@@ -261,10 +278,42 @@ class SavedHybrid:
     predictive_se: np.ndarray
     predictive_omega_se: float = 0.0
     extrapolation: dict | None = None
+    model: dict | None = None
 
-    def frequency(self, mu: float, branch: str = "stable", predictive: bool = False
-                  ) -> Interval | None:
-        """Frequency (Hz) median and 90% interval at μ, or ``None``.
+    def inference_data(self):
+        """``posterior.nc`` as ArviZ InferenceData (see ``HybridPosterior.to_inference_data``)."""
+        return arviz_io.read_inference_data(self.folder / POSTERIOR)
+
+    @cached_property
+    def posterior(self):
+        """The fit as a :class:`~bayeshopf.posterior.HybridPosterior`, rebuilt without refitting.
+
+        Its draws, features, MAP point, settings and diagnostics are the saved
+        ones, its ``log_likelihood`` the saved one; ``diagram``, ``ppc``,
+        ``frequency_band``, ``orbits`` and ``time_series_bands`` compute as on
+        the fitted object (the same draws and seed give the same numbers).
+
+        Raises:
+            DataError: For a folder written by a bayeshopf without the saved
+                features (before the ``amplitude`` group variables existed).
+        """
+        return _rebuild(self)
+
+    def diagram(self, mu=None, ci: float = CI):
+        """The bifurcation diagram (:meth:`~bayeshopf.posterior.HybridPosterior.diagram`)."""
+        return self.posterior.diagram(mu, ci)
+
+    def ppc(self, ci: float = CI):
+        """The predictive check (:meth:`~bayeshopf.posterior.HybridPosterior.ppc`)."""
+        return self.posterior.ppc(ci)
+
+    def plot(self, out_dir=None, recordings=None, **kwargs) -> list[Path]:
+        """Draw the fit's figures again; :func:`redraw_figures` (into ``figures/`` by default)."""
+        return redraw_figures(self, recordings, out_dir, **kwargs)
+
+    def frequency(self, mu: float, branch: str = "stable", predictive: bool = False,
+                  ci: float = CI) -> Interval | None:
+        """Frequency (Hz) median and ``ci`` interval (90% by default) at μ, or ``None``.
 
         ``None`` without a frequency model, or where no draw has the branch.
         """
@@ -279,7 +328,7 @@ class SavedHybrid:
                                omega_se=self.predictive_omega_se,
                                seed=int(self.summary.get("seed", 0)))[:, 0]
         f = f[np.isfinite(f)]
-        return interval(f) if f.size else None
+        return interval(f, ci) if f.size else None
 
     def _draws(self, mu: float, branch: str, predictive: bool) -> np.ndarray:
         from bayeshopf import posterior as bp
@@ -298,8 +347,9 @@ class SavedHybrid:
             c = c + sd * rng.standard_normal(c.shape)
         return bp.amplitude_of(self.spec, c)[:, 0]
 
-    def predict(self, mu: float, branch: str = "stable", predictive: bool = False) -> Interval:
-        """Amplitude median and 90% interval at μ on ``branch``.
+    def predict(self, mu: float, branch: str = "stable", predictive: bool = False,
+                ci: float = CI) -> Interval:
+        """Amplitude median and ``ci`` interval (90% by default) at μ on ``branch``.
 
         Raises:
             DataError: When the branch does not exist at μ in any posterior draw.
@@ -311,11 +361,184 @@ class SavedHybrid:
                 f"draw (Hopf point μ0 ≈ {np.median(self.samples['mu0']):.4g}"
                 + (f", fold ≈ {self.summary['mu_fold']['median']:.4g}"
                    if self.summary.get("mu_fold") else "") + ")")
-        return interval(draws)
+        return interval(draws, ci)
 
     def p_exists(self, mu: float, branch: str = "stable") -> float:
         """Posterior probability that ``branch`` exists at μ."""
         return float(np.isfinite(self._draws(mu, branch, False)).mean())
+
+
+def _rebuild(saved: SavedHybrid):
+    """The :class:`~bayeshopf.posterior.HybridPosterior` of a fit folder (see ``posterior``)."""
+    from dataclasses import fields
+
+    from bayeshopf.features.harmonics import HarmonicFeatures
+    from bayeshopf.inference.collapsed import CollapsedSettings, MapPoint, PosteriorRun
+    from bayeshopf.posterior import HybridPosterior
+
+    path = saved.folder / POSTERIOR
+    idata = saved.inference_data()
+    groups = set(idata.groups())
+    need = {"observed_data": ("amplitude", "coeffs"),
+            "constant_data": ("mu", "unstable", "coeffs_se", "amplitude_sd", "n_segments",
+                              "segment_rms", "frequency_se")}
+    for g, names in need.items():
+        ds = getattr(idata, g) if g in groups else None
+        missing = [n for n in names if ds is None or n not in ds]
+        if missing:
+            raise DataError(f"{path}: expected {g} variables {', '.join(missing)} (written by "
+                            "bayeshopf since its figures can be redrawn); found none: fit "
+                            "the recordings again to redraw figures (predict still works)")
+    obs, const = idata.observed_data, idata.constant_data
+    spec = saved.spec
+    freq = (np.asarray(obs["frequency"].values, float) if "frequency" in obs
+            else np.full(obs.sizes["recording"], np.nan))
+    features = HarmonicFeatures(
+        mu=np.asarray(const["mu"].values, float),
+        unstable=np.asarray(const["unstable"].values).astype(bool),
+        coeffs=np.asarray(obs["coeffs"].values, float),
+        coeffs_se=np.asarray(const["coeffs_se"].values, float),
+        segment_rms=np.asarray(const["segment_rms"].values, float),
+        n_segments=np.asarray(const["n_segments"].values).astype(int),
+        omega=2 * np.pi * freq,
+        omega_se=2 * np.pi * np.asarray(const["frequency_se"].values, float),
+        amplitude=np.asarray(obs["amplitude"].values, float),
+        amplitude_sd=np.asarray(const["amplitude_sd"].values, float),
+        frame=spec.frame, n_harmonics=spec.n_harmonics,
+        names=tuple(str(n) for n in obs["recording"].values))
+    post_ds = idata.posterior
+    chains = {k: np.asarray(v.values) for k, v in post_ds.data_vars.items()
+              if k not in ("beta", "gamma")}
+    n = post_ds.sizes["chain"] * post_ds.sizes["draw"]
+    betas = np.asarray(post_ds["beta"].values).reshape((n,) + post_ds["beta"].shape[2:])
+    gammas = (np.asarray(post_ds["gamma"].values).reshape((n,) + post_ds["gamma"].shape[2:])
+              if "gamma" in post_ds else None)
+    model, summary = saved.model or {}, saved.summary
+    m = model.get("map", {})
+    params = {k: np.asarray(v, float) for k, v in m.get("params", {}).items()}
+    if not params:     # an older folder: the summary's few MAP values
+        params = {k: np.asarray(v, float) for k, v in summary.get("map", {}).items()
+                  if v is not None}
+    map_point = MapPoint(params=params, unconstrained={}, log_joint=m.get("log_joint", np.nan),
+                         grad_norm=m.get("grad_norm", np.nan), converged=m.get("converged", True),
+                         n_steps=m.get("steps", 0), start={})
+    method = summary.get("diagnostics", {}).get("posterior", {}).get("method", "nuts")
+    run = PosteriorRun(method, chains, betas, gammas, int(model.get("divergences", 0)))
+    known = {f.name for f in fields(CollapsedSettings)}
+    settings = CollapsedSettings(**{k: v for k, v in summary.get("settings", {}).items()
+                                    if k in known})
+    post = HybridPosterior(spec, features, map_point, run, settings,
+                           int(summary.get("seed", 0)), summary.get("mu_label", "mu"),
+                           summary.get("mu_units", ""), summary.get("amplitude_units", ""),
+                           timings=dict(summary.get("timings_s", {})),
+                           diagnostics=dict(summary.get("diagnostics", {})))
+    if "log_likelihood" in groups and "y" in idata.log_likelihood:
+        # the saved leave-one-out log-likelihood, instead of computing it again
+        post.__dict__["log_likelihood"] = np.asarray(idata.log_likelihood["y"].values)
+    return post
+
+
+def _bare(name: str) -> str:
+    """A recording's name without a data file's suffix (``run01.csv`` and ``run01`` match)."""
+    for suffix in (".csv", ".mat"):
+        if name.lower().endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def _recordings_in_fit_order(saved: SavedHybrid, recordings):
+    """``recordings`` (a RecordingSet or a folder) as the fit's recordings, in its order.
+
+    Recordings are matched by name (a file's ``.csv`` or ``.mat`` suffix aside),
+    else as the only recording at a fitted μ on its branch.
+
+    Raises:
+        DataError: When a recording of the fit is missing or its μ or branch differ.
+    """
+    from bayeshopf.data import load_recordings
+    from bayeshopf.data.recording import RecordingSet
+
+    planar = tuple(saved.spec.frame.names)
+    rs = (recordings if isinstance(recordings, RecordingSet)
+          else load_recordings(recordings, planar=planar))
+    f = saved.posterior.features
+    by_name = {_bare(r.name): r for r in rs}
+    unnamed = [r for r in rs if _bare(r.name) not in {_bare(n) for n in f.names}]
+    picked = {}
+    for name, mu, unstable in zip(f.names, f.mu, f.unstable, strict=True):
+        if _bare(name) in by_name:
+            picked[name] = by_name[_bare(name)]
+            continue
+        # a renamed file: the one recording at the fit's μ on its branch
+        same = [r for r in unnamed if np.isclose(r.mu, mu)
+                and (r.branch == "unstable") == bool(unstable)]
+        if len(same) == 1:
+            picked[name] = same[0]
+    missing = [n for n in f.names if n not in picked]
+    if missing:
+        raise DataError(f"recordings: expected the fit's recordings {', '.join(f.names)} (by "
+                        f"name, or by μ and branch); missing {', '.join(missing)}")
+    recs = []
+    for name, mu, unstable in zip(f.names, f.mu, f.unstable, strict=True):
+        r = picked[name]
+        if not np.isclose(r.mu, mu) or (r.branch == "unstable") != bool(unstable):
+            raise DataError(f"recordings: {name}: expected μ = {mu:g}, "
+                            f"{'unstable' if unstable else 'stable'} as fitted; found μ = "
+                            f"{r.mu:g}, {r.branch}")
+        recs.append(r)
+    return RecordingSet(tuple(recs), planar=rs.planar, mu_label=rs.mu_label,
+                        mu_units=rs.mu_units, extra=rs.extra)
+
+
+def redraw_figures(saved: SavedHybrid, recordings=None, out_dir=None, *,
+                   fmt: str = "png", truth=None, **kwargs) -> list[Path]:
+    """Draw a saved fit's figures again, without refitting, and move them into place atomically.
+
+    The figures are drawn into a staging folder beside ``out_dir`` and each is
+    moved into ``out_dir`` with ``os.replace`` once all are drawn, so a failed
+    run leaves the old figures as they were. Without ``recordings`` the
+    figures that need the raw records (phase portraits, time series) are
+    left out.
+
+    Args:
+        saved: The fit (:func:`load_fit`).
+        recordings: The recordings it was fitted to (a
+            :class:`~bayeshopf.data.recording.RecordingSet` or a folder that
+            :func:`~bayeshopf.data.load_recordings` reads), or ``None``.
+        out_dir: Destination (default ``saved.folder / "figures"``).
+        fmt: ``"png"``, ``"pdf"`` or ``"svg"``.
+        truth: A planted or simulated truth to overlay (e.g. the demo's).
+        **kwargs: Passed to :func:`~bayeshopf.plotting.plot_all` (``ci``,
+            ``length_unit``, ``offsets``, ``dpi``, ``zoom``).
+
+    Returns:
+        The paths written.
+
+    Raises:
+        DataError: For recordings that are not the fit's.
+        OutputError: When the folder cannot be written.
+    """
+    from bayeshopf.plotting import plot_all
+
+    out = Path(out_dir) if out_dir is not None else saved.folder / FIGURES
+    rs = None if recordings is None else _recordings_in_fit_order(saved, recordings)
+    post = saved.posterior
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    except OSError as e:
+        raise OutputError(f"{out}: cannot create the figures folder ({e.strerror})") from None
+    try:
+        drawn = plot_all(post, rs, stage, truth=truth, fmt=fmt, **kwargs)
+        paths = []
+        for p in drawn:
+            os.replace(p, out / p.name)
+            paths.append(out / p.name)
+    except OSError as e:
+        raise OutputError(f"{out}: cannot write the figures ({e.strerror or e})") from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return paths
 
 
 def load_fit(folder: str | os.PathLike[str]) -> SavedHybrid:
@@ -324,6 +547,7 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedHybrid:
     Raises:
         DataError: When a file is missing or unreadable.
     """
+    ensure_x64()
     folder = Path(folder)
     if not folder.is_dir():
         raise DataError(f"{folder}: expected a fit folder (from 'bayeshopf fit'); not found")
@@ -345,4 +569,5 @@ def load_fit(folder: str | os.PathLike[str]) -> SavedHybrid:
     except Exception as e:  # netCDF/HDF5 raise many types
         raise DataError(f"{folder / POSTERIOR}: not a readable posterior file ({e})") from None
     return SavedHybrid(folder, spec, samples, summary, np.asarray(model["predictive_se"]),
-                       float(model.get("predictive_omega_se", 0.0)), model.get("extrapolation"))
+                       float(model.get("predictive_omega_se", 0.0)), model.get("extrapolation"),
+                       model)

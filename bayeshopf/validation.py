@@ -38,6 +38,7 @@ import numpy as np
 from scipy.stats import binom
 from tqdm.auto import tqdm
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.summaries import CI, interval
 from bayeshopf.errors import FitError
@@ -163,6 +164,50 @@ class LeaveOneOut:
                 "mean_band_width": float(np.nanmean(width)),
             }
         return out
+
+    def to_dataset(self):
+        """The folds as an :class:`xarray.Dataset` over ``recording`` and ``estimator``.
+
+        ``estimator`` holds the methods (``"bayes"``, ``"map"``; not named
+        ``method``, which ``Dataset.sel`` takes as its own argument). Per
+        recording: ``mu``, ``branch``, ``measured``, ``measured_sd``; per
+        recording and estimator: the prediction's ``median``, ``lower``, ``upper``
+        (its 90% band), ``inside``, ``relative_error``, ``p_exists``, and the
+        fit's ``mu_fold``/``mu0`` medians and interval ends (``mu_fold_lower``, …).
+        """
+        import xarray as xr
+
+        r, rm = ("recording",), ("recording", "estimator")
+
+        def per(get):
+            return (rm, np.array([[get(f, m) for m in self.methods] for f in self.folds],
+                                 dtype=float))
+
+        def pred(attr, k=None):
+            if k is None:
+                return per(lambda f, m: getattr(f.predictions[m], attr))
+            return per(lambda f, m: getattr(f.predictions[m], attr)[k])
+
+        data = {
+            "mu": (r, np.array([f.mu for f in self.folds], float)),
+            "branch": (r, np.array([f.branch for f in self.folds])),
+            "measured": (r, np.array([f.measured for f in self.folds], float)),
+            "measured_sd": (r, np.array([f.measured_sd for f in self.folds], float)),
+            "median": pred("median"), "lower": pred("lo"), "upper": pred("hi"),
+            "inside": (rm, np.array([[f.inside(m) for m in self.methods]
+                                     for f in self.folds])),
+            "relative_error": per(lambda f, m: f.relative_error(m)),
+            "p_exists": pred("p_exists"),
+            "mu_fold": pred("mu_fold", 0), "mu_fold_lower": pred("mu_fold", 1),
+            "mu_fold_upper": pred("mu_fold", 2),
+            "mu0": pred("mu0", 0), "mu0_lower": pred("mu0", 1), "mu0_upper": pred("mu0", 2),
+        }
+        return xr.Dataset(data, coords={"recording": [f.name for f in self.folds],
+                                        "estimator": list(self.methods)}, attrs={"ci": CI})
+
+    def to_dataframe(self):
+        """One row per held-out recording and estimator (:meth:`to_dataset`), pandas."""
+        return self.to_dataset().to_dataframe()
 
     def table(self) -> list[dict]:
         """One row per fold (JSON-ready)."""
@@ -324,6 +369,7 @@ def leave_one_out(
     Raises:
         FitError: For an unknown method or recording name.
     """
+    ensure_x64()
     settings = settings or CollapsedSettings()
     methods = tuple(methods)
     unknown = set(methods) - set(METHODS)

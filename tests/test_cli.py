@@ -144,11 +144,92 @@ def test_console_script_no_traceback(good_data, tmp_path):
 
 
 def test_help_everywhere(capsys):
-    for argv in (["--help"], ["demo", "--help"], ["fit", "--help"], ["predict", "--help"]):
+    from bayeshopf.cli.main import build_parser
+
+    commands = list(build_parser()._subparsers._group_actions[0].choices)
+    assert {"demo", "fit", "predict", "download", "simulate", "discrepancy"} <= set(commands)
+    for argv in [["--help"]] + [[c, "--help"] for c in commands]:
         with pytest.raises(SystemExit) as e:
             main(argv)
         assert e.value.code == 0
-    assert "predict" in capsys.readouterr().out
+        out = capsys.readouterr().out
+        assert "%%" not in out and "%(" not in out, (argv, out)
+        assert "usage: bayeshopf" in out
+        if argv[0] == "demo":
+            assert "1% noise" in out and "90% intervals" in out
+
+
+def test_version(capsys):
+    import bayeshopf
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.strip() == f"bayeshopf {bayeshopf.__version__}"
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_debug_before_or_after_the_subcommand(where, monkeypatch, capsys):
+    from bayeshopf import report
+
+    def broken(folder):
+        raise RuntimeError("boom\nsecond line")
+
+    monkeypatch.setattr(report, "load_fit", broken)
+    argv = ["predict", "somewhere", "--mu", "16"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == ("bayeshopf predict: internal error: RuntimeError: boom "
+                   "(rerun with --debug for details)")
+    argv = ["--debug"] + argv if where == "before" else argv + ["--debug"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "RuntimeError: boom" in err
+
+
+@pytest.mark.parametrize("argv, found", [
+    (["fit", "--out", "OUT"], "found neither"),
+    (["fit", "DATA", "--dataset", "flutter_cbc", "--out", "OUT"], "found both"),
+])
+def test_fit_needs_data_or_dataset(argv, found, tmp_path, capsys):
+    argv = [str(tmp_path / a) if a in ("OUT", "DATA") else a for a in argv]
+    assert main(argv + ["--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--dataset flutter_cbc" in err and found in err
+    assert not (tmp_path / "OUT").exists()
+
+
+def test_fit_dataset_downloads_from_the_mirror(user_without_shared, tmp_path, monkeypatch,
+                                               capsys):
+    """``fit --dataset flutter_cbc`` without ../shared: the rig's 7 recordings, downloaded."""
+    from bayeshopf.cli import main as cli
+    from bayeshopf.errors import FitError
+
+    url, served, data_dir = user_without_shared
+    seen = {}
+
+    def stop(rs, criticality, args, out, **kw):   # the fit itself is tested elsewhere
+        seen.update(rs=rs, criticality=criticality, out=out)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(cli, "_run_hybrid", stop)
+    out = tmp_path / "rig-fit"
+    assert main(["fit", "--dataset", "flutter_cbc", "--out", str(out), "--planar", "alpha",
+                 "h"]) == 2
+    assert "stopped by the test" in capsys.readouterr().err
+    rs = seen["rs"]
+    assert len(rs) == 7 and rs.planar == ("alpha", "h") and seen["criticality"] == "subcritical"
+    assert len({p for p in served if p.endswith(".mat")}) == 7
+    assert len(list((data_dir / "flutter_cbc").glob("CBC_*.mat"))) == 7
+
+
+def test_download_command(user_without_shared, tmp_path, capsys):
+    to = tmp_path / "here"
+    assert main(["download", "flutter_cbc", "--to", str(to)]) == 0
+    assert capsys.readouterr().out.strip() == str(to)
+    assert len(list(to.glob("CBC_*.mat"))) == 7
+    assert main(["download", "flutter_cbc"]) == 0
+    assert capsys.readouterr().out.strip() == str(user_without_shared[2] / "flutter_cbc")
 
 
 @pytest.fixture(scope="module")
@@ -216,6 +297,80 @@ def test_predict_json_matches_summary(fitted, capsys):
     lo, hi = freq["ci90"]
     assert lo <= freq["median"] <= hi, freq
     assert freq["median"] == pytest.approx(abs(rec["frequency_hz"]), rel=0.05), (freq, rec)
+
+
+def test_predict_several_mu_table_csv_json(fitted, capsys):
+    import csv
+    import io
+
+    s = json.loads((fitted / "summary.json").read_text())
+    mu0 = s["mu0"]["median"]
+    lo_mu = min(r["mu"] for r in s["recordings"] if r["branch"] == "stable")
+    start, step = round(lo_mu, 2), 0.25
+    spec = f"{start}:{start + 1}:{step}"                           # 5 values, STOP included
+    mus = [start + step * k for k in range(5)]
+    assert main(["predict", str(fitted), "--mu", spec, "--csv"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert [float(r["mu"]) for r in rows] == pytest.approx(mus)
+    amp = [[float(r[f"amplitude_{k} [m]"]) for k in ("lo", "median", "hi")] for r in rows]
+    assert all(lo <= m <= hi for lo, m, hi in amp)
+    assert all(r["ci"] == "0.9" and float(r["p_exists"]) > 0.5 for r in rows)
+    # each row is the single-μ prediction
+    assert main(["predict", str(fitted), "--mu", str(mus[2]), "--json"]) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert one["amplitude"]["median"] == pytest.approx(amp[2][1], rel=1e-12)
+    # --ci: a narrower interval inside the 90% one; JSON keys follow the level
+    assert main(["predict", str(fitted), "--mu", str(mus[0]), str(mus[1]), "--ci", "0.5",
+                 "--json"]) == 0
+    many = json.loads(capsys.readouterr().out)
+    assert [m["mu"] for m in many] == pytest.approx(mus[:2])
+    for m, a in zip(many, amp, strict=False):
+        lo, hi = m["amplitude"]["ci50"]
+        assert a[0] < lo <= m["amplitude"]["median"] <= hi < a[2]
+        assert "ci50" in m["frequency_hz"]
+    # the table: a header and one line per μ; beyond the Hopf point the unstable branch is "—"
+    mu_u = next(r["mu"] for r in s["recordings"] if r["branch"] == "unstable")
+    assert main(["predict", str(fitted), "--mu", str(mu_u), str(mu0 + 5), "--branch",
+                 "unstable"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 4 and "90% interval" in lines[1]
+    assert "—" not in lines[2] and "—" in lines[3]
+
+
+def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, monkeypatch,
+                                                capsys):
+    """``fit --ci 0.8``: the saved and printed intervals at 80% (the fit itself reused)."""
+    from bayeshopf import posterior, report
+
+    post = report.load_fit(fitted).posterior
+    monkeypatch.setattr(posterior, "fit_hybrid", lambda rs, crit, **kw: post)
+    out = tmp_path / "ci80"
+    assert main(["fit", str(good_data), "--out", str(out), "--quiet", "--no-figures",
+                 "--ci", "0.8"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    ref = json.loads((fitted / "summary.json").read_text())
+    assert s["ci"] == 0.8 and "ci80" in s["mu0"] and "ci90" not in s["mu0"]
+    lo80, hi80 = s["mu0"]["ci80"]
+    lo90, hi90 = ref["mu0"]["ci90"]
+    assert lo90 < lo80 < hi80 < hi90
+    printed = capsys.readouterr().out
+    assert "80% interval" in printed and "predicted (80%)" in printed
+    assert "inside their 80% predictive intervals" in printed
+    assert main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--ci", "90"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--ci 90" in err
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--mu", "15:14:0.5"], "--mu 15:14:0.5"),
+    (["--mu", "a"], "--mu a"),
+    (["--mu", "15", "--ci", "1.5"], "--ci 1.5"),
+    (["--mu", "15", "--json", "--csv"], "both"),
+])
+def test_predict_bad_arguments_one_line(args, needle, fitted, capsys):
+    assert main(["predict", str(fitted)] + args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err
 
 
 def test_predict_unstable_beyond_hopf_is_clear_error(fitted, capsys):

@@ -157,6 +157,33 @@ def test_cbc_mu_from_file_name_and_sorting(tmp_path: Path) -> None:
     np.testing.assert_allclose(rs[0].channel("h"), 0.18 * v["data"][0])
 
 
+@needs_cbc
+def test_manifest_lists_cbc_mat_files(cbc: RecordingSet, tmp_path: Path) -> None:
+    d = tmp_path / "m"
+    d.mkdir()
+    (d / "manifest.csv").write_text(
+        "file,mu,branch\n"
+        f"{CBC_DIR / 'CBC_unstable_v15_6.mat'},15.6,unstable\n"
+        f"{CBC_DIR / 'CBC_stable_v14_9.mat'},14.9,stable\n"
+    )
+    rs = load_recordings(d)
+    assert rs.names == ["CBC_unstable_v15_6.mat", "CBC_stable_v14_9.mat"]  # manifest order
+    assert rs.mus.tolist() == [15.6, 14.9]  # the manifest's mu wins over Wind_sped (15.7)
+    assert [r.branch for r in rs] == ["unstable", "stable"]
+    assert (rs.planar, rs.mu_label, rs.mu_units) == (("h", "alpha"), "airspeed", "m/s")
+    np.testing.assert_array_equal(rs[0].channel("h"), cbc[5].channel("h"))
+    np.testing.assert_array_equal(rs[1].t, cbc[0].t)
+
+
+def test_csv_with_gaps_of_whole_samples_is_read(tmp_path: Path) -> None:
+    d = good_folder(tmp_path / "d")
+    table = good_table(40)
+    write_csv(d, "rec2.csv", "t,h [m],alpha [rad]", np.delete(table, [5, 6, 20], axis=0))
+    rec = read_interchange(d)[1]
+    assert rec.t.size == 37 and rec.has_gaps and rec.dt == pytest.approx(0.01)
+    assert not read_interchange(d)[0].has_gaps
+
+
 # --------------------------------------------------------------------------- interchange
 
 

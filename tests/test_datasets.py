@@ -19,7 +19,8 @@ needs_cbc = pytest.mark.skipif(
 
 @pytest.fixture(autouse=True)
 def no_network(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv(FLUTTER_CBC_ENV, raising=False)
+    for var in (FLUTTER_CBC_ENV, datasets.FLUTTER_CBC_URL_ENV, datasets.DATA_DIR_ENV):
+        monkeypatch.delenv(var, raising=False)
 
     def refuse(*args: object, **kwargs: object) -> str:
         raise AssertionError("tests must not download")
@@ -109,3 +110,73 @@ def test_download_failure_is_data_error(monkeypatch: pytest.MonkeyPatch) -> None
         DataError, match=r"CBC_stable_v14_9\.mat: download from .* no route to host"
     ):
         flutter_cbc(download=True)
+
+
+def test_download_from_a_mirror_is_hash_checked_and_reused(user_without_shared) -> None:
+    url, served, data_dir = user_without_shared
+    n0 = len(served)
+    rs = flutter_cbc(download=True)
+    assert len(rs) == 7 and rs.planar == ("h", "alpha")
+    assert sorted(served[n0:]) == sorted(f"/{name}" for name in FLUTTER_CBC_SHA256)
+    folder = data_dir / "flutter_cbc"
+    assert sorted(p.name for p in folder.glob("*.mat")) == sorted(FLUTTER_CBC_SHA256)
+    assert flutter_cbc(folder).names == rs.names          # the download is a valid local copy
+    n1 = len(served)
+    assert datasets.download_flutter_cbc() == folder       # already there: nothing fetched
+    assert flutter_cbc(download=True).names == rs.names
+    assert len(served) == n1
+
+
+def test_download_to_a_folder(user_without_shared, tmp_path: Path) -> None:
+    to = tmp_path / "mine"
+    assert datasets.download_flutter_cbc(to) == to
+    assert {p.name: datasets._sha256(p) for p in to.glob("*.mat")} == FLUTTER_CBC_SHA256
+
+
+def test_corrupted_cached_file_is_fetched_again(user_without_shared) -> None:
+    url, served, data_dir = user_without_shared
+    name = "CBC_stable_v15_6.mat"
+    (data_dir / "flutter_cbc").mkdir(parents=True)
+    (data_dir / "flutter_cbc" / name).write_bytes(b"half a file")
+    n0 = len(served)
+    assert len(flutter_cbc(download=True)) == 7
+    assert f"/{name}" in served[n0:]
+    assert datasets._sha256(data_dir / "flutter_cbc" / name) == FLUTTER_CBC_SHA256[name]
+
+
+def test_download_with_a_wrong_hash_is_one_line(user_without_shared,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    name = "CBC_unstable_v15_6.mat"
+    monkeypatch.setitem(FLUTTER_CBC_SHA256, name, "0" * 64)
+    with pytest.raises(DataError) as err:
+        flutter_cbc(download=True)
+    msg = str(err.value)
+    assert msg.startswith(f"{name}: download from {user_without_shared[0]}{name} failed")
+    assert "hash" in msg.lower() and "\n" not in msg
+    assert datasets.FLUTTER_CBC_URL_ENV in msg
+
+
+@pytest.mark.parametrize("notebook", ["03_wind_tunnel.ipynb", "04_missing_physics.ipynb"])
+def test_notebook_loads_the_rig_without_shared(notebook: str, user_without_shared,
+                                               tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The notebooks' loading lines, run where ../shared is absent: the download."""
+    import os
+
+    import nbformat
+
+    nb = nbformat.read(Path(__file__).parents[1] / "notebooks" / notebook, as_version=4)
+    code = "\n".join(c.source for c in nb.cells if c.cell_type == "code").splitlines()
+    lines = [ln.strip() for ln in code if "flutter_cbc(" in ln or ln.startswith("DATA = ")]
+    assert len(lines) == 2 and lines[0].startswith("DATA = "), lines
+    assert "download=True" in lines[1]
+    monkeypatch.chdir(tmp_path)
+    ns = {"os": os, "Path": Path, "flutter_cbc": flutter_cbc}
+    served = user_without_shared[1]
+    n0 = len(served)
+    for line in lines:
+        exec(line, ns)
+    assert not Path(ns["DATA"]).is_dir()
+    rs = ns.get("rs", ns.get("rig"))
+    assert len(rs) == 7
+    assert sorted(served[n0:]) == sorted(f"/{name}" for name in FLUTTER_CBC_SHA256)

@@ -15,8 +15,6 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from bayeshopf.data.synthetic import demo_system  # noqa: E402
-from bayeshopf.inference.collapsed import CollapsedSettings  # noqa: E402
 from bayeshopf.plotting import (  # noqa: E402
     FIGURE_NAMES,
     FREQUENCY_FIGURE_NAMES,
@@ -34,12 +32,9 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def fitted():
+def fitted(fast_demo_fit):
     """The fast demo fit with its recordings, truth, diagram and predictive check."""
-    rs, truth = demo_system(seed=0, fast=True)
-    from bayeshopf.posterior import fit_hybrid
-
-    f = fit_hybrid(rs, "subcritical", seed=0, settings=CollapsedSettings.fast(), progress=False)
+    f, rs, truth = fast_demo_fit
     return dict(fit=f, rs=rs, truth=truth, diagram=f.diagram(diagram_grid(f)), ppc=f.ppc())
 
 
@@ -130,7 +125,7 @@ def test_plot_bifurcation(fitted, tmp_path) -> None:
     fig = plot_bifurcation(d, ppc, mu_label=f.mu_label, mu_units=f.mu_units,
                            amplitude_units=f.amplitude_units, amplitude_label="heave peak-to-peak",
                            truth=truth.amplitude)
-    assert isinstance(fig, Figure) and len(fig.axes) == 1
+    assert isinstance(fig, Figure) and len(fig.axes) == 2  # the diagram and P(exists) above it
     ax = fig.axes[0]
     for branch in ("stable", "unstable"):
         assert len(_by_gid(ax.lines, f"{branch}-median")) == 1
@@ -176,7 +171,7 @@ def test_plot_bifurcation_zoom_inset(fitted) -> None:
     window = default_zoom(f, d.stable.mu)
     assert window[0] < max(ppc.mu[~ppc.unstable]) <= window[1]
     fig = plot_bifurcation(d, ppc, truth=truth.amplitude, zoom=window)
-    assert len(fig.axes) == 1
+    assert len(fig.axes) == 2
     (inset,) = fig.axes[0].child_axes
     assert inset.get_xlim() == pytest.approx(window)
     lo, hi = inset.get_ylim()
@@ -214,8 +209,8 @@ def test_plot_phase_portraits(fitted, tmp_path) -> None:
         assert 0 < len(measured.get_xdata()) <= 150
         assert ax.get_title() == f"μ = {rec.mu:.4g} m/s, {rec.branch}"
     assert fig.axes[0].get_title() == "μ = 15.3 m/s, stable"
-    assert fig.axes[0].get_ylabel() == "alpha [rad]"
-    assert fig.axes[-1].get_xlabel() == "h [m]"
+    assert fig.axes[0].get_ylabel() == "Δalpha [rad]"   # each recording's mean removed
+    assert fig.axes[-1].get_xlabel() == "Δh [m]"
     _assert_png(save_figure(fig, tmp_path / "phase.png"))
 
 
@@ -268,3 +263,204 @@ def test_plotting_is_pure(fitted, tmp_path) -> None:
     _assert_same(before, after)
     assert plt.get_fignums() == figs_before  # nothing registered with pyplot
     assert dict(matplotlib.rcParams) == rc_before
+
+
+# -- journal options: ax=, offsets, units, vector output, branches to the Hopf point ----
+
+
+def _public_plot_functions():
+    import inspect
+
+    from bayeshopf.plotting import (
+        channels,
+        diagram,
+        discrepancy,
+        pair_invariant,
+        phase,
+        ppc,
+        timeseries,
+        truth,
+        validation,
+    )
+
+    mods = (channels, diagram, discrepancy, pair_invariant, phase, ppc, timeseries, truth,
+            validation)
+    return [fn for m in mods for name, fn in inspect.getmembers(m, inspect.isfunction)
+            if name.startswith("plot_") and fn.__module__ == m.__name__
+            and name != "plot_discrepancy"]       # plot_discrepancy writes files
+
+
+def test_every_plotting_function_takes_ax() -> None:
+    import inspect
+
+    fns = _public_plot_functions()
+    assert len(fns) >= 10
+    assert [fn.__name__ for fn in fns if "ax" not in inspect.signature(fn).parameters] == []
+
+
+def test_given_axes_are_drawn_into(fitted) -> None:
+    f, rs, ppc = fitted["fit"], fitted["rs"], fitted["ppc"]
+    from bayeshopf.plotting import plot_frequency, plot_time_series
+    from bayeshopf.plotting.truth import plot_diagram_vs_truth
+
+    fig = Figure()
+    axes = fig.subplots(2, 4).ravel()
+    assert plot_phase_portraits(f, rs, n_orbits=3, max_points=50, ax=axes) is fig
+    assert all(_by_gid(a.lines, "orbit-median") for a in axes[: len(rs)])
+    assert not axes[-1].get_visible()            # one axes more than recordings: hidden
+    with pytest.raises(ValueError, match="expected 7 matplotlib Axes"):
+        plot_phase_portraits(f, rs, ax=axes[:3])
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    assert plot_ppc(ppc, ax=ax) is fig and len(fig.axes) == 1   # panel (a) only
+    assert _by_gid(ax.lines, "stable-points")
+    fig = Figure()
+    pair = fig.subplots(1, 2)
+    assert plot_ppc(ppc, ax=pair) is fig and pair[1].images
+
+    fig = Figure()
+    ax = fig.add_subplot()
+    mu = f.default_mu_grid(30)
+    assert plot_frequency([f.frequency_band(mu, "stable")], ax=ax) is fig
+    assert _by_gid(ax.lines, "stable-median")
+    bands = f.time_series_bands(rs)[:2]
+    fig = Figure()
+    two = fig.subplots(1, 2)
+    assert plot_time_series(bands, ax=two) is fig and _by_gid(two[1].lines, "measured")
+    fig = Figure()
+    ax = fig.add_subplot()
+    assert plot_diagram_vs_truth(f, fitted["truth"], mu=mu, zoom=False, ax=ax) is fig
+    assert _by_gid(ax.lines, "stable-median") and _by_gid(ax.lines, "truth")
+
+
+def _with_offsets(rs, shift: dict):
+    """The recordings with constant sensor offsets added (a rig's h ≈ 0.6 m, α ≈ 0.7 rad)."""
+    recs = tuple(dataclasses.replace(r, channels={k: np.asarray(v) + shift.get(k, 0.0)
+                                                  for k, v in r.channels.items()})
+                 for r in rs)
+    return dataclasses.replace(rs, recordings=recs)
+
+
+def test_offsets_removed_or_kept(fitted) -> None:
+    f = fitted["fit"]
+    rs = _with_offsets(fitted["rs"], {"h": 0.6, "alpha": 0.7})
+    rec = next(iter(rs))
+    z = rec.planar(rs.planar)
+    centre, scale = z.mean(axis=0), np.ptp(z, axis=0)
+    removed = plot_phase_portraits(f, rs, n_orbits=2).axes[0]
+    kept = plot_phase_portraits(f, rs, n_orbits=2, offsets="keep").axes[0]
+    (m,) = _by_gid(removed.lines, "measured")
+    xy = np.column_stack([m.get_xdata(), m.get_ydata()])
+    assert np.all(np.abs(xy.mean(axis=0)) < 0.02 * scale)       # centred on the recording
+    (mk,) = _by_gid(kept.lines, "measured")
+    assert np.mean(mk.get_xdata()) == pytest.approx(centre[0], rel=0.01)   # 0.6 m kept
+    # the model orbit is shifted by the same amount, so a mismatch of centres still shows
+    (a,), (b,) = _by_gid(removed.lines, "orbit-median"), _by_gid(kept.lines, "orbit-median")
+    np.testing.assert_allclose(a.get_xdata(), np.asarray(b.get_xdata()) - centre[0])
+    np.testing.assert_allclose(a.get_ydata(), np.asarray(b.get_ydata()) - centre[1])
+    assert removed.get_ylabel() == "Δalpha [rad]" and kept.get_ylabel() == "alpha [rad]"
+    with pytest.raises(ValueError, match="offsets"):
+        plot_phase_portraits(f, rs, offsets="subtract")
+
+    from bayeshopf.plotting import plot_time_series
+
+    band = f.time_series_bands(rs)[0]
+    assert np.mean(band.measured) > 0.5                          # the offset is in the band
+    ax = plot_time_series([band]).axes[0]
+    (m,) = _by_gid(ax.lines, "measured")
+    assert abs(np.mean(m.get_ydata())) < 1e-9
+    (med,) = _by_gid(ax.lines, "median")
+    np.testing.assert_allclose(med.get_ydata(), band.median - np.mean(band.measured))
+    assert ax.get_ylabel() == "Δh [m]"
+    ax = plot_time_series([band], offsets="keep").axes[0]
+    (m,) = _by_gid(ax.lines, "measured")
+    np.testing.assert_allclose(m.get_ydata(), band.measured)
+
+
+def test_length_unit_scales_lengths_only(fitted) -> None:
+    d, ppc, f, rs = fitted["diagram"], fitted["ppc"], fitted["fit"], fitted["rs"]
+    base = plot_bifurcation(d, ppc, amplitude_units="m").axes[0]
+    mm = plot_bifurcation(d, ppc, amplitude_units="m", length_unit="mm").axes[0]
+    (a,), (b,) = _by_gid(base.lines, "stable-median"), _by_gid(mm.lines, "stable-median")
+    np.testing.assert_allclose(b.get_ydata(), 1000 * np.asarray(a.get_ydata()), equal_nan=True)
+    (a,), (b,) = _by_gid(base.lines, "stable-measured"), _by_gid(mm.lines, "stable-measured")
+    np.testing.assert_allclose(b.get_ydata(), 1000 * np.asarray(a.get_ydata()))
+    assert mm.get_ylabel() == "peak-to-peak of z1 [mm]"
+    assert mm.get_ylim()[1] == pytest.approx(1000 * base.get_ylim()[1])
+    # phase portraits: h (m) in mm, alpha (rad) in degrees
+    ax = plot_phase_portraits(f, rs, n_orbits=2, length_unit="mm", angle_unit="deg",
+                              offsets="keep").axes[0]
+    (m,) = _by_gid(ax.lines, "measured")
+    z = next(iter(rs)).planar(rs.planar)
+    assert np.max(m.get_xdata()) == pytest.approx(1000 * z[:, 0].max(), rel=1e-9)
+    assert np.max(m.get_ydata()) == pytest.approx(np.degrees(z[:, 1].max()), rel=1e-9)
+    assert ax.get_ylabel() == "alpha [deg]"
+    fig = plot_ppc(ppc, amplitude_units="m", amplitude_label="A", length_unit="mm")
+    assert fig.axes[0].get_xlabel() == "measured A [mm]"
+    with pytest.raises(ValueError, match="length_unit"):
+        plot_bifurcation(d, amplitude_units="m", length_unit="furlong")
+
+
+def test_unstable_branch_is_drawn_to_the_hopf_point(fitted) -> None:
+    d = fitted["diagram"]
+    fig = plot_bifurcation(d)
+    ax = fig.axes[0]
+    (line,) = _by_gid(ax.lines, "unstable-median")
+    x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+    ok = np.isfinite(y)
+    end = np.flatnonzero(ok)[-1]
+    step = np.max(np.diff(d.unstable.mu))
+    assert y[end] == 0.0 and abs(x[end] - d.mu0.median) <= step   # it meets the Hopf marker
+    assert np.all(y[ok][:-1] > 0)                # positive all along, zero only at the end
+    assert not np.isfinite(y[end + 1:]).any()    # nothing drawn past the Hopf point
+    # where the branch exists in every draw the drawn band is the conditional one
+    full = d.unstable.p_exists == 1.0
+    np.testing.assert_allclose(y[full], d.unstable.median[full])
+    # the outer band fans over the Hopf point's interval: its top reaches 0 past the median
+    (band,) = _by_gid(ax.collections, "unstable-band90")
+    xs = np.concatenate([p.vertices[:, 0] for p in band.get_paths()])
+    assert xs.max() >= d.mu0.median
+    # P(exists) above the diagram, sharing μ
+    p_ax = fig.axes[1]
+    (p,) = _by_gid(p_ax.lines, "unstable-p-exists")
+    np.testing.assert_allclose(p.get_ydata(), d.unstable.p_exists)
+    assert p_ax.get_ylabel() == "P(exists)"
+
+
+def test_measured_points_carry_the_measured_spread(fitted) -> None:
+    from bayeshopf.plotting._style import z_value
+
+    d, ppc = fitted["diagram"], fitted["ppc"]
+    assert ppc.measured_se is not None and np.all(ppc.measured_se > 0)
+    ax = plot_bifurcation(d, ppc).axes[0]
+    stable = ~np.asarray(ppc.unstable, bool)
+    (bars,) = [c for c in _by_gid(ax.collections, "stable-measured-interval")
+               if hasattr(c, "get_segments")]
+    seg = np.array(bars.get_segments())                       # (n, 2, 2)
+    half = (seg[:, 1, 1] - seg[:, 0, 1]) / 2
+    np.testing.assert_allclose(np.sort(half), np.sort(z_value(0.9) * ppc.measured_se[stable]))
+    np.testing.assert_allclose(np.sort(seg.mean(axis=1)[:, 1]), np.sort(ppc.measured[stable]))
+    # the old bars, the model's predictive intervals, on request
+    ax = plot_bifurcation(d, ppc, bars="predictive").axes[0]
+    (bars,) = [c for c in _by_gid(ax.collections, "stable-measured-interval")
+               if hasattr(c, "get_segments")]
+    lo = np.array([iv.lo for iv, s in zip(ppc.predictive, stable, strict=True) if s])
+    np.testing.assert_allclose(np.sort(np.array(bars.get_segments())[:, 0, 1]), np.sort(lo))
+
+
+@pytest.mark.parametrize("fmt,magic", [("pdf", b"%PDF"), ("svg", b"<svg")])
+def test_vector_output(fitted, tmp_path, fmt, magic) -> None:
+    path = save_figure(plot_bifurcation(fitted["diagram"], fitted["ppc"]),
+                       tmp_path / f"bifurcation.{fmt}")
+    data = path.read_bytes()
+    assert path.suffix == f".{fmt}" and len(data) > 5_000 and magic in data[:2_000]
+    assert os.listdir(tmp_path) == [f"bifurcation.{fmt}"]
+
+
+def test_plot_all_vector_without_recordings(fitted, tmp_path) -> None:
+    paths = plot_all(fitted["fit"], None, tmp_path, fmt="svg", ci=0.5)
+    assert [p.name for p in paths] == ["bifurcation.svg", "ppc.svg", "frequency.svg"]
+    assert all(p.stat().st_size > 5_000 for p in paths)
+    text = paths[0].read_text()
+    assert 'id="unstable-median"' in text and 'id="stable-p-exists"' in text

@@ -15,11 +15,21 @@ import time
 import traceback
 from pathlib import Path
 
+from bayeshopf.cli import design as _next
 from bayeshopf.cli import discrepancy as _discrepancy
 from bayeshopf.cli import simulate as _simulate
 
 EXIT_USAGE = 2
 EXIT_ERROR = 1
+
+#: Published data sets of ``fit --dataset`` and ``download``.
+DATASETS = ("flutter_cbc",)
+
+
+def _version() -> str:
+    from bayeshopf import __version__
+
+    return __version__
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -33,6 +43,9 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="with --inference svi: also run NUTS on the same model and report "
                    "whether SVI's 90%% intervals match NUTS's (summary.json 'nuts_check')")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--ci", type=float, default=0.9,
+                   help="probability mass of the printed and saved intervals and of the "
+                   "figures' outer band (default 0.9; the convergence checks stay at 90%%)")
     p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
 
@@ -45,23 +58,30 @@ def build_parser() -> argparse.ArgumentParser:
         "limit-cycle-oscillation recordings.",
     )
     ap.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
     d = sub.add_parser("demo", help="fit simulated recordings of the 3-DOF aeroelastic aerofoil",
                        description="Simulate stable and unstable LCO recordings of the paper's "
-                       "3-DOF aeroelastic aerofoil in-process (4 + 4 orbits, 1%% noise, sensor "
+                       "3-DOF aeroelastic aerofoil in-process (4 + 4 orbits, 1% noise, sensor "
                        "offsets; no download), fit the model blind, print the Hopf point, a2 and "
-                       "the fold with 90%% intervals next to the simulator's own values, and "
+                       "the fold with 90% intervals next to the simulator's own values, and "
                        "write the figures with the true bifurcation diagram.")
     d.add_argument("--out", default="bayeshopf-demo", help="output folder (default bayeshopf-demo)")
     _add_fit_options(d)
 
     f = sub.add_parser("fit", help="fit recordings in a folder",
                        description="Fit a folder of CBC .mat files or an interchange folder "
-                       "(manifest.csv + one CSV per recording). Writes DIR/summary.json, "
-                       "DIR/posterior.nc, DIR/model.json and DIR/figures/*.png.")
-    f.add_argument("data", help="folder of .mat files, or interchange folder")
+                       "(manifest.csv + one CSV per recording), or a published data set "
+                       "(--dataset). Writes DIR/summary.json, DIR/posterior.nc, DIR/model.json "
+                       "and DIR/figures/*.png.")
+    f.add_argument("data", nargs="?", default=None,
+                   help="folder of .mat files, or interchange folder (or use --dataset)")
+    f.add_argument("--dataset", choices=tuple(DATASETS), default=None,
+                   help="a published data set instead of DATA: flutter_cbc, the wind-tunnel "
+                   "rig's 7 CBC recordings ($BAYESHOPF_FLUTTER_CBC if set, else downloaded "
+                   "once, 11 MB, SHA-256 checked)")
     f.add_argument("--out", required=True, help="output folder (refused if not empty)")
     f.add_argument("--criticality", choices=("sub", "super", "auto"), default="sub",
                    help="normal form: subcritical (default), supercritical, or auto "
@@ -72,21 +92,69 @@ def build_parser() -> argparse.ArgumentParser:
                    "(one fit per refit)")
     f.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
                    help="channels of the planar pair (default: the first two)")
+    f.add_argument("--rig", metavar="FILE", default=None,
+                   help="rig description (TOML or JSON) of DATA's .mat files: rows, scales, "
+                   "time, mu, what a sensor writes without a reading (default: DATA/rig.toml "
+                   "if present, else the built-in flutter_cbc rig)")
     _add_fit_options(f)
 
-    p = sub.add_parser("predict", help="amplitude at μ from a saved fit",
-                       description="Amplitude median and 90%% interval at μ on a branch, "
-                       "from a folder written by 'bayeshopf fit' or 'bayeshopf demo'.")
+    p = sub.add_parser("predict", help="amplitude and frequency at μ from a saved fit",
+                       description="Amplitude and frequency (median and credible interval) "
+                       "at one or several μ on a branch, from a folder written by "
+                       "'bayeshopf fit' or 'bayeshopf demo'.")
     p.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
-    p.add_argument("--mu", type=float, required=True, help="value of the bifurcation parameter")
+    p.add_argument("--mu", nargs="+", required=True, metavar="MU",
+                   help="values of the bifurcation parameter, or START:STOP:STEP "
+                   "(STOP included), e.g. --mu 15 15.5 16 or --mu 14:17:0.5")
+    p.add_argument("--ci", type=float, default=0.9,
+                   help="probability mass of the intervals (default 0.9)")
     p.add_argument("--branch", choices=("stable", "unstable"), default="stable")
     p.add_argument("--predictive", action="store_true",
                    help="band of a new measurement instead of the curve (adds the model "
                    "error, which grows away from the recordings, and the measurement error)")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON (an object for one μ, a list for several)")
+    p.add_argument("--csv", action="store_true", help="print CSV, one row per μ")
+
+    g = sub.add_parser("download", help="download a published data set",
+                       description="Download a published data set with its pinned SHA-256 "
+                       "hashes and print the folder that holds it (files already there are "
+                       "not fetched again). flutter_cbc: the wind-tunnel rig's 7 CBC "
+                       "recordings (11 MB) from github.com/Kyounghyunlee/ML_Hopf, or from "
+                       "$BAYESHOPF_FLUTTER_CBC_URL.")
+    g.add_argument("dataset", choices=tuple(DATASETS))
+    g.add_argument("--to", default=None,
+                   help="folder to download into (default: the user cache, "
+                   "$BAYESHOPF_DATA_DIR/flutter_cbc if set)")
+
+    pl = sub.add_parser("plot", help="draw a saved fit's figures again, without refitting",
+                        description="Draw the figures of a folder written by 'bayeshopf fit' "
+                        "or 'bayeshopf demo' again into DIR/figures (replacing files of the "
+                        "same name once all are drawn), without refitting: the diagram, the "
+                        "predictive check and the frequency; with --recordings also the phase "
+                        "portraits and time series.")
+    pl.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
+    pl.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
+                    help="file format (default png; pdf and svg are vector)")
+    pl.add_argument("--recordings", metavar="DATA", default=None,
+                    help="the recordings the fit was made from (folder, as for 'fit'), for "
+                    "the phase portraits and time series")
+    pl.add_argument("--ci", type=float, default=0.9,
+                    help="probability mass of the bands and intervals (default 0.9)")
+    pl.add_argument("--length-unit", default="auto",
+                    help="unit of lengths: m, cm, mm, µm, or auto (default: the one in which "
+                    "the largest amplitude reads 1-1000)")
+    pl.add_argument("--offsets", choices=("remove", "keep"), default="remove",
+                    help="remove (default) or keep each recording's mean in the phase "
+                    "portraits and time series")
+    pl.add_argument("--dpi", type=int, default=300, help="resolution of png files (default 300)")
 
     _simulate.add_parser(sub)
     _discrepancy.add_parser(sub)
+    _next.add_parser(sub)
+    for s in sub.choices.values():   # --debug after the subcommand as well as before it
+        s.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="show tracebacks of internal errors")
     return ap
 
 
@@ -99,7 +167,10 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
     evidence = summary.get("criticality_evidence")
     if evidence and "statement" in evidence:
         print(textwrap.fill(evidence["statement"], 88))
-    hdr = f"{'':8s} {'median':>10s} {'90% interval':>24s}" + (f" {'true':>10s}" if truth else "")
+    level = summary.get("ci", 0.9)
+    key, pct = f"ci{round(100 * level)}", f"{100 * level:g}%"
+    hdr = (f"{'':8s} {'median':>10s} {pct + ' interval':>24s}"
+           + (f" {'true':>10s}" if truth else ""))
     print(hdr)
     for k in ("mu0", "a2", "a4", "mu_fold", "w_unfold"):
         v = summary.get(k)
@@ -110,22 +181,23 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
             continue
         t = "" if not truth or truth.get(k) is None else f" {truth[k]:10.4g}"
         unit = "" if k in ("a2", "a4", "w_unfold") else f" {u}"
-        print(f"{k:8s} {v['median']:10.4g} [{v['ci90'][0]:10.4g}, {v['ci90'][1]:10.4g}]{t}{unit}")
+        print(f"{k:8s} {v['median']:10.4g} [{v[key][0]:10.4g}, {v[key][1]:10.4g}]{t}{unit}")
     if curved:
         print("(curved unfolding β(μ) = (exp(b(μ−μ0)) − 1)/b, w = b(μ0 − μ_fold); a2 is its "
               "cubic coefficient, β(μ_fold) = −a2²/4)")
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
-          f"{'predicted (90%)':>30s}  [{au}]")
+          f"{'predicted (' + pct + ')':>30s}  [{au}]")
     for r in summary["recordings"]:
         p = r["predicted"]
-        flag = "" if r["inside_ci90"] else "  OUTSIDE"
+        flag = "" if r[f"inside_{key}"] else "  OUTSIDE"
         print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {r['amplitude']:10.4g} "
-              f"{p['median']:10.4g} [{p['ci90'][0]:8.4g}, {p['ci90'][1]:8.4g}]{flag}")
+              f"{p['median']:10.4g} [{p[key][0]:8.4g}, {p[key][1]:8.4g}]{flag}")
     ppc = summary["ppc"]
-    print(f"\n{ppc['amplitudes_inside_ci90']}/{ppc['n_recordings']} measured amplitudes inside "
-          f"their 90% predictive intervals; {100 * ppc['coefficients_inside_ci90']:.0f}% of the "
-          "Fourier coefficients inside theirs.")
+    print(f"\n{ppc[f'amplitudes_inside_{key}']}/{ppc['n_recordings']} measured amplitudes "
+          f"inside their {pct} predictive intervals; "
+          f"{100 * ppc[f'coefficients_inside_{key}']:.0f}% of the Fourier coefficients inside "
+          "theirs.")
     if ppc.get("frequencies_inside_ci90") is not None:
         freqs = [r["frequency_predicted"] for r in summary["recordings"]]
         lo = min(f["ci90"][0] for f in freqs if f)
@@ -179,8 +251,14 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     if getattr(args, "nuts_check", False) and args.inference != "svi":
         raise FitError("--nuts-check compares SVI with NUTS and needs --inference svi; got "
                        "--inference nuts (the default), whose R̂ and ESS are reported anyway")
+    if not 0 < args.ci < 1:
+        raise FitError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected "
+                       "(e.g. 0.9)")
     report.check_output_folder(out, args.force)
     progress = not args.quiet
+    if progress:
+        print(f"features: {len(rs)} recordings ({int(rs.is_unstable.sum())} unstable), "
+              "phase-aligned harmonics", file=sys.stderr)
     t0 = time.perf_counter()
     settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
     settings = replace(settings, inference=args.inference)
@@ -197,16 +275,19 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
 
         extra = {**(extra or {}), "nuts_check": compare_with_nuts(post, seed=args.seed,
                                                                   progress=progress)}
-    ppc = post.ppc()
+    if progress:
+        print(f"checks and files: posterior predictive check, "
+              f"{'' if args.no_figures else 'figures, '}writing {out}", file=sys.stderr)
+    ppc = post.ppc(args.ci)
     figures = None
     if not args.no_figures:
         from bayeshopf.plotting import plot_all
 
         def figures(folder):
-            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None)
+            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None, ci=args.ci)
 
     report.save_hybrid(post, out, force=args.force, figures=figures, ppc=ppc,
-                       extra_summary=extra)
+                       extra_summary=extra, ci=args.ci)
     summary = json.loads((Path(out) / report.SUMMARY).read_text())
     summary["total_s"] = time.perf_counter() - t0
     return summary
@@ -236,17 +317,46 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _recordings(args):
+    """``fit``'s recordings: the folder DATA or the published data set ``--dataset``."""
+    from bayeshopf.errors import DataError
+
+    if (args.data is None) == (args.dataset is None):
+        found = "both" if args.data is not None else "neither"
+        raise DataError(f"DATA: a folder of recordings or --dataset {'|'.join(DATASETS)} "
+                        f"expected (one of the two); found {found}")
+    planar = tuple(args.planar) if args.planar else None
+    if args.data is not None:
+        from bayeshopf.data import load_recordings
+        from bayeshopf.data.io import dropped_report
+
+        rs = load_recordings(args.data, planar=planar, rig=args.rig)
+        for line in [] if args.quiet else dropped_report(rs):
+            print(f"data: {line}", file=sys.stderr)
+        return rs
+    if args.rig is not None:
+        raise DataError(f"--rig: describes the .mat files of DATA; --dataset {args.dataset} "
+                        "has its own description (drop --rig)")
+    from dataclasses import replace
+
+    from bayeshopf.data.datasets import flutter_cbc
+
+    if not args.quiet:
+        print(f"data: {args.dataset} (downloaded once into the user cache unless "
+              "$BAYESHOPF_FLUTTER_CBC names a folder)", file=sys.stderr)
+    rs = flutter_cbc(download=True)
+    return rs if planar is None else replace(rs, planar=planar)
+
+
 def cmd_fit(args) -> int:
     """``bayeshopf fit``."""
-    from bayeshopf.data import load_recordings
-
     crit = {"sub": "subcritical", "super": "supercritical", "auto": "auto"}[args.criticality]
     if args.exact_loo and crit != "auto":
         from bayeshopf.errors import FitError
 
         raise FitError(f"--exact-loo compares the two normal forms and needs --criticality "
                        f"auto; got --criticality {args.criticality}")
-    rs = load_recordings(args.data, planar=tuple(args.planar) if args.planar else None)
+    rs = _recordings(args)
     summary = _run_hybrid(rs, crit, args, args.out)
     _print_table(summary)
     print(f"\nwrote {args.out}/summary.json, posterior.nc, model.json and figures/ "
@@ -254,32 +364,140 @@ def cmd_fit(args) -> int:
     return 0
 
 
+def _mu_values(tokens: list[str]) -> list[float]:
+    """``--mu`` values: numbers and ``START:STOP:STEP`` ranges (STOP included)."""
+    import numpy as np
+
+    from bayeshopf.errors import DataError
+
+    out: list[float] = []
+    for tok in tokens:
+        parts = tok.split(":")
+        try:
+            nums = [float(x) for x in parts]
+        except ValueError:
+            nums = []
+        if len(parts) == 1 and nums:
+            out.append(nums[0])
+        elif len(nums) == 3 and nums[2] > 0 and nums[1] >= nums[0]:
+            n = int(np.floor((nums[1] - nums[0]) / nums[2] + 1e-9)) + 1
+            out.extend(float(v) for v in np.round(nums[0] + nums[2] * np.arange(n), 12))
+        else:
+            raise DataError(f"--mu {tok}: a number or START:STOP:STEP with STEP > 0 and "
+                            f"STOP >= START expected; found {tok!r}")
+    return out
+
+
+def _prediction(saved, mu: float, args) -> dict:
+    """One μ of ``predict``: amplitude (None where the branch does not exist) and frequency."""
+    from bayeshopf.errors import DataError
+
+    try:
+        amp = saved.predict(mu, args.branch, predictive=args.predictive, ci=args.ci)
+    except DataError:
+        amp = None
+    freq = None if amp is None else saved.frequency(mu, args.branch, args.predictive,
+                                                     ci=args.ci)
+    return {"mu": mu, "amplitude": amp, "frequency": freq,
+            "p_exists": saved.p_exists(mu, args.branch)}
+
+
 def cmd_predict(args) -> int:
-    """``bayeshopf predict``."""
+    """``bayeshopf predict``: one μ as a sentence, several as a table (or JSON, CSV)."""
+    from bayeshopf.errors import DataError
     from bayeshopf.report import load_fit
 
+    if not 0 < args.ci < 1:
+        raise DataError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected "
+                        "(e.g. 0.9)")
+    if args.json and args.csv:
+        raise DataError("--json and --csv: one output format expected; found both")
+    mus = _mu_values(args.mu)
     saved = load_fit(args.fit_dir)
-    iv = saved.predict(args.mu, args.branch, predictive=args.predictive)
-    p = saved.p_exists(args.mu, args.branch)
-    freq = saved.frequency(args.mu, args.branch, args.predictive)
+    rows = [_prediction(saved, mu, args) for mu in mus]
+    if len(mus) == 1 and rows[0]["amplitude"] is None:   # the fit's own message
+        saved.predict(mus[0], args.branch, predictive=args.predictive, ci=args.ci)
+    if all(r["amplitude"] is None for r in rows):
+        raise DataError(f"--mu {' '.join(args.mu)}: the {args.branch} branch does not exist "
+                        "at any of these μ in any posterior draw (Hopf point μ0 ≈ "
+                        f"{saved.summary['mu0']['median']:.4g})")
+    units = saved.summary.get("amplitude_units", "")
+    mu_units = saved.summary.get("mu_units", "")
+    level = f"{100 * args.ci:g}%"
     if args.json:
-        out = {"mu": args.mu, "branch": args.branch, "amplitude": iv.to_json(),
-               "p_exists": p, "units": saved.summary.get("amplitude_units", "")}
+        out = [{"mu": r["mu"], "branch": args.branch, "predictive": args.predictive,
+                "amplitude": None if r["amplitude"] is None else r["amplitude"].to_json(),
+                "p_exists": r["p_exists"], "units": units,
+                **({"frequency_hz": r["frequency"].to_json()} if r["frequency"] else {})}
+               for r in rows]
+        print(json.dumps(out[0] if len(out) == 1 else out))
+    elif args.csv:
+        import csv
+
+        w = csv.writer(sys.stdout, lineterminator="\n")
+        w.writerow(["mu", "branch", "ci", "p_exists", f"amplitude_median [{units}]",
+                    f"amplitude_lo [{units}]", f"amplitude_hi [{units}]",
+                    "frequency_median [Hz]", "frequency_lo [Hz]", "frequency_hi [Hz]"])
+        for r in rows:
+            a, f = r["amplitude"], r["frequency"]
+            w.writerow([repr(r["mu"]), args.branch, args.ci, r["p_exists"],
+                        *(("", "", "") if a is None else (a.median, a.lo, a.hi)),
+                        *(("", "", "") if f is None else (f.median, f.lo, f.hi))])
+    elif len(rows) == 1:
+        r, u = rows[0], units
+        iv, freq = r["amplitude"], r["frequency"]
+        print(f"{args.branch} LCO at μ = {r['mu']:g} {mu_units}: "
+              f"amplitude {iv.median:.4g} {u}, {level} interval [{iv.lo:.4g}, {iv.hi:.4g}] {u} "
+              f"(branch exists in {100 * r['p_exists']:.0f}% of posterior draws)")
         if freq is not None:
-            out["frequency_hz"] = freq.to_json()
-        print(json.dumps(out))
+            print(f"frequency {freq.median:.4g} Hz, {level} interval "
+                  f"[{freq.lo:.4g}, {freq.hi:.4g}] Hz")
     else:
-        u = saved.summary.get("amplitude_units", "")
-        print(f"{args.branch} LCO at μ = {args.mu:g} {saved.summary.get('mu_units', '')}: "
-              f"amplitude {iv.median:.4g} {u}, 90% interval [{iv.lo:.4g}, {iv.hi:.4g}] {u} "
-              f"(branch exists in {100 * p:.0f}% of posterior draws)")
-        if freq is not None:
-            print(f"frequency {freq.median:.4g} Hz, 90% interval [{freq.lo:.4g}, {freq.hi:.4g}] Hz")
+        what = "a new measurement's" if args.predictive else "the curve's"
+        print(f"{args.branch} branch, {what} median and {level} interval")
+        print(f"{'mu [' + mu_units + ']':>10s} {'P(exists)':>9s} "
+              f"{'amplitude [' + units + ']':>14s} {level + ' interval':>22s} "
+              f"{'frequency [Hz]':>14s} {level + ' interval':>20s}")
+        for r in rows:
+            a, f = r["amplitude"], r["frequency"]
+            amp = (f"{'—':>14s} {'':22s}" if a is None else
+                   f"{a.median:14.4g} [{a.lo:9.4g}, {a.hi:9.4g}]")
+            fr = "" if f is None else f" {f.median:14.4g} [{f.lo:8.4g}, {f.hi:8.4g}]"
+            print(f"{r['mu']:10.4g} {r['p_exists']:9.2f} {amp}{fr}".rstrip())
+    return 0
+
+
+def cmd_download(args) -> int:
+    """``bayeshopf download``: fetch a published data set and print its folder."""
+    from bayeshopf.data.datasets import download_flutter_cbc
+
+    print(download_flutter_cbc(args.to))
+    return 0
+
+
+def cmd_plot(args) -> int:
+    """``bayeshopf plot``: a saved fit's figures drawn again (``report.redraw_figures``)."""
+    from bayeshopf.errors import DataError
+    from bayeshopf.plotting._units import LENGTHS
+    from bayeshopf.report import load_fit
+
+    if not 0 < args.ci < 1:
+        raise DataError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected "
+                        "(e.g. 0.9)")
+    if args.length_unit not in ("auto", *LENGTHS):
+        raise DataError(f"--length-unit {args.length_unit}: one of auto, "
+                        f"{', '.join(LENGTHS)} expected; found {args.length_unit!r}")
+    saved = load_fit(args.fit_dir)
+    paths = saved.plot(recordings=args.recordings, fmt=args.format, ci=args.ci,
+                       length_unit=args.length_unit, offsets=args.offsets, dpi=args.dpi)
+    left = "" if args.recordings else " (phase portraits and time series need --recordings)"
+    print(f"wrote {', '.join(p.name for p in paths)} into {paths[0].parent}{left}")
     return 0
 
 
 COMMANDS = {"demo": cmd_demo, "fit": cmd_fit, "predict": cmd_predict, "simulate": _simulate.run,
-            "discrepancy": _discrepancy.run}
+            "discrepancy": _discrepancy.run, "download": cmd_download, "plot": cmd_plot,
+            "next": _next.run}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -288,10 +506,12 @@ def main(argv: list[str] | None = None) -> int:
     from bayeshopf.errors import BayesHopfError
 
     try:
+        from bayeshopf._x64 import ensure_x64
         from bayeshopf.inference.cache import enable_compilation_cache, single_thread_eigen
 
         single_thread_eigen()       # before any JAX work: XLA's Eigen pool stalls on CPU
         enable_compilation_cache()  # before any JAX work, so every compilation is cached
+        ensure_x64()                # bayeshopf computes in float64
         return COMMANDS[args.command](args)
     except BayesHopfError as e:
         print(f"bayeshopf {args.command}: error: {e}", file=sys.stderr)

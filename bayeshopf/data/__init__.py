@@ -9,3 +9,5 @@ from bayeshopf.data.io import read_interchange as read_interchange
 from bayeshopf.data.io import write_interchange as write_interchange
 from bayeshopf.data.recording import Recording as Recording
 from bayeshopf.data.recording import RecordingSet as RecordingSet
+from bayeshopf.data.rig import ChannelSpec as ChannelSpec
+from bayeshopf.data.rig import RigDescription as RigDescription

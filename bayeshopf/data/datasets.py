@@ -5,6 +5,12 @@ tunnel) are published in the MIT-licensed repository Kyounghyunlee/ML_Hopf
 (``src/measured_data/``). bayeshopf never ships them: :func:`flutter_cbc` reads
 them from a folder you name, or downloads them into pooch's cache with their
 SHA-256 hashes pinned below.
+
+Environment variables: ``BAYESHOPF_FLUTTER_CBC`` names a local folder with the
+files (used instead of a download); ``BAYESHOPF_FLUTTER_CBC_URL`` replaces the
+download's base URL (a mirror, e.g. ``http://localhost:8000/``);
+``BAYESHOPF_DATA_DIR`` moves the download folder from pooch's user cache
+(``~/.cache/bayeshopf`` on Linux) to ``$BAYESHOPF_DATA_DIR/flutter_cbc``.
 """
 
 from __future__ import annotations
@@ -17,9 +23,12 @@ from bayeshopf.data.io import _one_line, read_cbc_mat
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import DataError
 
-__all__ = ["FLUTTER_CBC_ENV", "FLUTTER_CBC_SHA256", "FLUTTER_CBC_URL", "flutter_cbc"]
+__all__ = ["DATA_DIR_ENV", "FLUTTER_CBC_ENV", "FLUTTER_CBC_SHA256", "FLUTTER_CBC_URL",
+           "FLUTTER_CBC_URL_ENV", "download_flutter_cbc", "flutter_cbc"]
 
 FLUTTER_CBC_ENV = "BAYESHOPF_FLUTTER_CBC"
+FLUTTER_CBC_URL_ENV = "BAYESHOPF_FLUTTER_CBC_URL"
+DATA_DIR_ENV = "BAYESHOPF_DATA_DIR"
 FLUTTER_CBC_URL = "https://github.com/Kyounghyunlee/ML_Hopf/raw/main/src/measured_data/"
 FLUTTER_CBC_SHA256: dict[str, str] = {
     "CBC_stable_v14_9.mat": "1f4656b7737b3bbb9a00528d9dbd61dccad9e3345ad62cf9423b1db644086985",
@@ -68,22 +77,59 @@ def _local_files(folder: Path, origin: str) -> list[Path]:
     return files
 
 
-def _download() -> list[Path]:
-    """Fetch the seven files into pooch's cache (hash-checked by pooch)."""
+def _base_url() -> str:
+    """``$BAYESHOPF_FLUTTER_CBC_URL`` (a mirror) if set, else :data:`FLUTTER_CBC_URL`."""
+    url = os.environ.get(FLUTTER_CBC_URL_ENV, "").strip() or FLUTTER_CBC_URL
+    return url if url.endswith("/") else url + "/"
+
+
+def _download(folder: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Fetch the seven files into ``folder`` or the cache (hash-checked by pooch).
+
+    Files already there with the pinned hash are not fetched again.
+    """
     import pooch
 
-    cache = Path(pooch.os_cache("bayeshopf")) / "flutter_cbc"
+    if folder is not None:
+        folder = Path(folder).expanduser()
+    elif os.environ.get(DATA_DIR_ENV, "").strip():
+        folder = Path(os.environ[DATA_DIR_ENV].strip()).expanduser() / "flutter_cbc"
+    else:
+        folder = Path(pooch.os_cache("bayeshopf")) / "flutter_cbc"
+    base = _base_url()
     files = []
     for name, sha in FLUTTER_CBC_SHA256.items():
-        url = FLUTTER_CBC_URL + name
+        url = base + name
         try:
             got = pooch.retrieve(
-                url, known_hash=f"sha256:{sha}", fname=name, path=cache, progressbar=False
+                url, known_hash=f"sha256:{sha}", fname=name, path=folder, progressbar=False
             )
         except Exception as exc:  # network, HTTP and hash-mismatch errors alike
-            raise DataError(f"{name}: download from {url} failed ({_one_line(exc)})") from exc
+            raise DataError(
+                f"{name}: download from {url} failed ({_one_line(exc)}); set "
+                f"{FLUTTER_CBC_URL_ENV} to a mirror or {FLUTTER_CBC_ENV} to a local copy"
+            ) from exc
         files.append(Path(got))
     return files
+
+
+def download_flutter_cbc(to: str | os.PathLike[str] | None = None) -> Path:
+    """Download the seven files (about 11 MB, SHA-256 checked) and return their folder.
+
+    Args:
+        to: Folder to download into; by default ``$BAYESHOPF_DATA_DIR/flutter_cbc``
+            or pooch's user cache (``~/.cache/bayeshopf/flutter_cbc`` on Linux).
+            The base URL is ``$BAYESHOPF_FLUTTER_CBC_URL`` if set, else the
+            authors' repository.
+
+    Returns:
+        The folder holding the seven ``CBC_*.mat`` files (give it to
+        :func:`flutter_cbc` or ``bayeshopf fit``).
+
+    Raises:
+        DataError: If a download fails or a file's hash differs.
+    """
+    return _download(to)[0].parent
 
 
 def flutter_cbc(
@@ -95,14 +141,15 @@ def flutter_cbc(
     LCOs stabilised by control-based continuation (14.9, 15.7, 16.5 m/s); see
     :func:`~bayeshopf.data.io.read_cbc_mat` for channels and units. The data are
     taken from, in order: ``path``; the folder named by the environment variable
-    ``BAYESHOPF_FLUTTER_CBC``; a download into ``pooch.os_cache("bayeshopf")``
-    when ``download`` is true. Local files are checked against the pinned
+    ``BAYESHOPF_FLUTTER_CBC``; a download (:func:`download_flutter_cbc`) when
+    ``download`` is true. Local files are checked against the pinned
     SHA-256 hashes.
 
     Args:
         path: Folder holding the seven ``CBC_*.mat`` files.
-        download: Download the files (about 11 MB) from GitHub if no folder is
-            given by ``path`` or the environment.
+        download: Download the files (about 11 MB) from GitHub, or from
+            ``$BAYESHOPF_FLUTTER_CBC_URL``, if no folder is given by ``path`` or the
+            environment; files already downloaded are reused.
 
     Returns:
         The recordings, stable branch first, each branch sorted by airspeed.
@@ -122,6 +169,6 @@ def flutter_cbc(
         raise DataError(
             "flutter_cbc: a data source expected; found none. Pass path=<folder with the 7 "
             f"CBC_*.mat files>, set {FLUTTER_CBC_ENV} to that folder, or use download=True "
-            f"(fetches them from {FLUTTER_CBC_URL})"
+            f"(fetches them from {_base_url()})"
         )
     return read_cbc_mat(files)

@@ -1,8 +1,9 @@
 """Immutable LCO recordings and recording sets.
 
 A :class:`Recording` is one measured limit-cycle oscillation held at a fixed
-value of the bifurcation parameter μ: uniformly sampled times ``t`` and named
-channels with units. A :class:`RecordingSet` groups recordings that share their
+value of the bifurcation parameter μ: uniformly sampled times ``t`` (with gaps
+where a reader left out samples that had no reading) and named channels with
+units. A :class:`RecordingSet` groups recordings that share their
 channels and names the planar pair (z1, z2) of the paper's map U12.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from types import MappingProxyType
 from typing import Literal
 
@@ -19,6 +21,8 @@ from bayeshopf.errors import DataError
 
 Branch = Literal["stable", "unstable"]
 BRANCHES: tuple[str, ...] = ("stable", "unstable")
+#: A spacing of ``t`` above this many times the median is a gap (left-out samples).
+GAP_FACTOR = 1.5
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -32,7 +36,8 @@ class Recording:
     """One LCO recording at a fixed μ.
 
     Attributes:
-        t: Sample times in seconds, shape ``(n_t,)``, uniform spacing.
+        t: Sample times in seconds, shape ``(n_t,)``, uniform spacing except
+            for gaps of whole sample intervals where samples were left out.
         channels: Channel name -> samples, each of shape ``(n_t,)`` (read-only).
         units: Channel name -> physical unit (``""`` when unknown).
         mu: Value of the bifurcation parameter μ (for the flutter rig, the
@@ -40,6 +45,8 @@ class Recording:
         branch: ``"stable"`` or ``"unstable"``.
         name: Short name, normally the file name (reported in summaries).
         source: Where the recording came from (a path or a description).
+        dropped: Samples the reader left out because a sensor had no reading
+            (:class:`~bayeshopf.data.rig.ChannelSpec`); they are not in ``t``.
     """
 
     t: np.ndarray
@@ -49,6 +56,7 @@ class Recording:
     branch: Branch
     name: str
     source: str = ""
+    dropped: int = 0
 
     def __post_init__(self) -> None:
         where = self.name or self.source or "recording"
@@ -76,11 +84,29 @@ class Recording:
         object.__setattr__(self, "channels", MappingProxyType(chans))
         object.__setattr__(self, "units", MappingProxyType(units))
         object.__setattr__(self, "mu", float(self.mu))
+        if isinstance(self.dropped, bool) or not isinstance(self.dropped, int | np.integer) \
+                or self.dropped < 0:
+            raise DataError(f"{where}: dropped must be a non-negative integer; "
+                            f"found {self.dropped!r}")
+        object.__setattr__(self, "dropped", int(self.dropped))
+
+    @cached_property
+    def dt(self) -> float:
+        """Sampling interval in seconds.
+
+        The mean spacing of ``t``; for a record with gaps (some spacing above
+        1.5 times the median) the median spacing.
+        """
+        mean = float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+        steps = np.diff(self.t)
+        median = float(np.median(steps))
+        return median if float(steps.max()) > GAP_FACTOR * median else mean
 
     @property
-    def dt(self) -> float:
-        """Sampling interval in seconds."""
-        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+    def has_gaps(self) -> bool:
+        """Whether ``t`` has gaps (some spacing above 1.5 times the median)."""
+        steps = np.diff(self.t)
+        return bool(float(steps.max()) > GAP_FACTOR * float(np.median(steps)))
 
     @property
     def duration(self) -> float:
@@ -102,6 +128,26 @@ class Recording:
     def planar(self, pair: tuple[str, str]) -> np.ndarray:
         """The planar pair (z1, z2) as an array of shape ``(n_t, 2)``."""
         return np.stack([self.channel(pair[0]), self.channel(pair[1])], axis=1)
+
+    def trace(self, pair: tuple[str, str], max_points: int | None = None) -> np.ndarray:
+        """The planar pair for drawing, with a NaN row at every gap.
+
+        Every k-th sample (at most ``max_points`` of them; all without it), and
+        a row of NaN between two kept samples more than 1.5 kept intervals
+        apart, so that a line drawn through the points breaks where samples
+        were left out instead of cutting across the orbit. Take means with
+        ``np.nanmean``.
+
+        Returns:
+            Shape ``(n_points, 2)``.
+        """
+        z = self.planar(pair)
+        step = 1 if not max_points else max(1, -(-z.shape[0] // max(int(max_points), 1)))
+        z, t = z[::step], self.t[::step]
+        if not self.has_gaps:
+            return z
+        after = np.flatnonzero(np.diff(t) > GAP_FACTOR * step * self.dt) + 1
+        return np.insert(z, after, np.nan, axis=0)
 
 
 @dataclass(frozen=True)

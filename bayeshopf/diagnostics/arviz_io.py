@@ -1,7 +1,12 @@
 """The one adapter between bayeshopf and ArviZ.
 
-On Python 3.11 pip resolves ArviZ 0.2x; its 1.x rewrite changes the API, so
-every ArviZ call of the package goes through this module.
+bayeshopf is on the ArviZ 0.x line (``arviz<0.24``, tested with 0.23):
+ArviZ 1.x needs Python ≥ 3.12, which bayeshopf (Python 3.11) does not have,
+and rewrites the API (``InferenceData`` becomes xarray's ``DataTree``, the
+stats move to ``arviz_stats``). Every ArviZ call of the package goes through
+this module, so a move to 1.x changes this file only; the saved
+``posterior.nc`` has one netCDF group per InferenceData group, which
+``xarray.open_datatree`` opens as well.
 """
 
 from __future__ import annotations
@@ -179,18 +184,40 @@ def rhat_ess(chains: dict) -> dict:
 
 def chains_to_inference_data(posterior: dict, *, observed: dict | None = None,
                              constant: dict | None = None, log_likelihood: dict | None = None,
+                             posterior_predictive: dict | None = None,
+                             sample_stats: dict | None = None,
                              coords: dict | None = None, dims: dict | None = None,
+                             extra_coords: dict | None = None,
                              attrs: dict | None = None) -> az.InferenceData:
     """InferenceData from draws by chain ``(n_chains, n_draws, ...)``.
 
-    ``log_likelihood`` holds pointwise log-likelihoods by chain and draw;
-    ``coords`` and ``dims`` name the axes (ArviZ's ``from_dict``).
+    ``log_likelihood``, ``posterior_predictive`` and ``sample_stats`` hold draws
+    by chain and draw too; ``observed`` and ``constant`` hold data without them.
+    ``coords`` and ``dims`` name the axes (ArviZ's ``from_dict``);
+    ``extra_coords`` adds non-index coordinates, ``name → (dim, values)``, to
+    every group with that dimension (e.g. the channel each frame axis follows).
+    ``attrs`` go to every group.
     """
-    return az.from_dict(
-        posterior={k: np.asarray(v) for k, v in posterior.items()},
-        log_likelihood={k: np.asarray(v) for k, v in (log_likelihood or {}).items()} or None,
-        coords=coords, dims=dims,
-        observed_data={k: np.asarray(v) for k, v in (observed or {}).items()} or None,
-        constant_data={k: np.asarray(v) for k, v in (constant or {}).items()} or None,
-        attrs=attrs or {},
-    )
+    def arrays(d):
+        return {k: np.asarray(v) for k, v in (d or {}).items()} or None
+
+    with warnings.catch_warnings():  # 0.2x announces its 1.x refactor
+        warnings.simplefilter("ignore", FutureWarning)
+        idata = az.from_dict(
+            posterior=arrays(posterior), log_likelihood=arrays(log_likelihood),
+            posterior_predictive=arrays(posterior_predictive),
+            sample_stats=arrays(sample_stats), observed_data=arrays(observed),
+            constant_data=arrays(constant), coords=coords, dims=dims, attrs=attrs or {},
+        )
+    for group in idata.groups():
+        ds = getattr(idata, group)
+        add = {k: v for k, v in (extra_coords or {}).items() if v[0] in ds.dims}
+        setattr(idata, group, ds.assign_coords(add).assign_attrs(attrs or {}))
+    return idata
+
+
+def read_inference_data(path: str | os.PathLike[str]) -> az.InferenceData:
+    """The InferenceData of a netCDF file (all groups loaded into memory, file closed)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        return az.from_netcdf(str(path))

@@ -49,8 +49,8 @@ class FrequencyBand:
         branch: ``"stable"`` or ``"unstable"``.
         mu: μ grid, shape ``(n_mu,)``.
         median: Median over the draws that have an LCO (nan where < half do).
-        lo: 5% quantile.
-        hi: 95% quantile.
+        lo: Lower end of the band (5% quantile at the default 90%).
+        hi: Upper end (95% quantile at 90%).
     """
 
     branch: str
@@ -60,14 +60,16 @@ class FrequencyBand:
     hi: np.ndarray
 
     @classmethod
-    def from_draws(cls, branch: str, mu, draws) -> FrequencyBand:
-        """Median and 90% band of frequency draws ``(n, n_mu)`` (``nan``: no LCO in a draw).
+    def from_draws(cls, branch: str, mu, draws, ci: float = 0.9) -> FrequencyBand:
+        """Median and ``ci`` band (90% by default) of frequency draws ``(n, n_mu)``.
 
-        ``nan`` where fewer than half the draws have the branch.
+        ``nan`` in a draw: no LCO there; ``nan`` in the band where fewer than
+        half the draws have the branch.
         """
         draws = np.asarray(draws, dtype=float)
         ok = np.isfinite(draws).mean(axis=0) >= 0.5
         with warnings.catch_warnings():      # all-nan columns: no draw has the branch there
             warnings.simplefilter("ignore", RuntimeWarning)
-            q = np.where(ok, np.nanquantile(draws, [0.5, 0.05, 0.95], axis=0), np.nan)
+            q = np.where(ok, np.nanquantile(draws, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0),
+                         np.nan)
         return cls(branch, np.asarray(mu, dtype=float), q[0], q[1], q[2])

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.discrepancy.features import DEFAULT_K, measure
 from bayeshopf.discrepancy.locate import locate
@@ -188,6 +189,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             extra-force input.
         TypeError: ``hybrid_settings`` that are not a ``CollapsedSettings``.
     """
+    ensure_x64()
     from tqdm.auto import tqdm
 
     if hybrid:

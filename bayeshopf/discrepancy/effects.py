@@ -26,6 +26,7 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.discrepancy.terms import KINDS, TermError, library
 from bayeshopf.simulators.base import System
 
@@ -103,6 +104,7 @@ def with_effect(system: System, name: str, value: float) -> System:
         TermError: If ``name`` is not an effect of this system, or ``value`` is
             not finite (or negative for a freeplay gap).
     """
+    ensure_x64()
     names = effect_names(system)
     if name not in names:
         raise TermError(f"--effect: expected one of {', '.join(names) or '(none)'} for "
@@ -172,6 +174,7 @@ def effect_orbits(system: System, name: str, value: float, plan) -> tuple[System
     Raises:
         TermError: If the branch has no LCO at a requested point with the effect.
     """
+    ensure_x64()
     from bayeshopf.discrepancy.orbits import solve_orbits, track
     from bayeshopf.simulators.continuation import bifurcation_diagram, continue_from_hopf
 
@@ -213,6 +216,7 @@ def simulate_with_effect(system: System, name: str, value: float, mu=None, branc
         value, units and the Hopf point and fold of the system with the effect
         (``None`` where they cannot be computed).
     """
+    ensure_x64()
     import dataclasses
 
     from bayeshopf.data.recording import RecordingSet
@@ -235,6 +239,7 @@ def simulate_with_effect(system: System, name: str, value: float, mu=None, branc
 
 def truth_points(system: System, name: str, value: float) -> dict:
     """Hopf point and folds (lowest μ first) of ``system`` with the effect (``None``: none)."""
+    ensure_x64()
     from bayeshopf.errors import BayesHopfError
     from bayeshopf.simulators.continuation import continue_from_hopf
 

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.periodic import floquet_stable
 
@@ -117,6 +118,7 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
         max_iter: Largest number of Newton steps.
         tol: Convergence on the Newton step relative to the orbit's size.
     """
+    ensure_x64()
     shoot, f, sample = _batched(system)
     p = _params(params)
     xhat = np.array(x0, dtype=np.float64)
@@ -180,6 +182,7 @@ def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch,
     An orbit that is not found in one step is retried in 4, then 16 equal steps
     of the parameters; one still not found (or ``start`` lost) is lost.
     """
+    ensure_x64()
     stable = np.asarray(stable, bool)
     res = solve_orbits(system, params_to, start.x0, start.period, start.mu, stable)
     x0, T, ok, states = res.x0.copy(), res.period.copy(), res.ok & start.ok, res.states.copy()

@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 
@@ -253,6 +254,7 @@ def library(system: System, amplitude: Mapping[str, float], frequency_hz: float,
         TermError: If the system declares no extra-force input or no observed
             coordinate.
     """
+    ensure_x64()
     if system.force_input is None or not system.coordinates:
         raise TermError(f"{system.name}: a system with coordinates and force_input expected; "
                         "found none (terms cannot be added to it)")
@@ -310,6 +312,7 @@ def library_system(system: System, lib: Library) -> System:
     compiled functions, and the system is cached per base system and term names,
     so a second analysis with other amplitudes compiles nothing.
     """
+    ensure_x64()
     base = _library_system(system, tuple((t.name, t.kind, t.coordinate, t.index)
                                          for t in lib.terms))
     return base

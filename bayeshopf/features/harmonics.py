@@ -21,6 +21,15 @@ Each datum is the mean over segments; its measurement error is the standard
 error of that mean (the spread over segments divided by √n), and never less
 than the least-squares standard error of the whole record, which is also the
 error of a record too short to cut (a single segment).
+
+**Records with gaps.** A reader leaves out samples at which a sensor had no
+reading (:class:`~bayeshopf.data.rig.ChannelSpec`), so ``t`` may skip whole
+sample intervals. The least-squares fits use the samples that are there, at
+their own times, and need no uniform sampling; the periodogram that starts the
+frequency search puts the samples back on their uniform grid with zeros in the
+gaps; segments are cut by time, so each covers the same span as without gaps.
+The frame's centre and scale come from the samples that are there: gaps at one
+phase move them a little, which only changes the frame (a common affine map).
 """
 
 from __future__ import annotations
@@ -30,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from bayeshopf.data.recording import RecordingSet
+from bayeshopf.data.recording import GAP_FACTOR, RecordingSet
 from bayeshopf.errors import DataError
 from bayeshopf.features.frame import PlanarFrame
 
@@ -91,12 +100,33 @@ def reconstruct(coeffs, phi) -> np.ndarray:
     return phase_design(phi, K) @ np.swapaxes(np.asarray(coeffs), -1, -2)
 
 
+def _grid_index(t: np.ndarray) -> tuple[np.ndarray, float]:
+    """Index of each sample on the uniform grid of ``t`` and the grid's spacing.
+
+    Without gaps (no spacing above :data:`~bayeshopf.data.recording.GAP_FACTOR`
+    times the median) the indices are ``0..n−1`` and the spacing the mean one.
+    """
+    steps = np.diff(t)
+    median = float(np.median(steps))
+    if float(steps.max()) <= GAP_FACTOR * median:
+        return np.arange(t.size), float((t[-1] - t[0]) / (t.size - 1))
+    return np.rint((t - t[0]) / median).astype(np.int64), median
+
+
 def _frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
-    """Fundamental angular frequency: the periodogram's peak, refined by least squares."""
+    """Fundamental angular frequency: the periodogram's peak, refined by least squares.
+
+    Samples of a record with gaps go back on their uniform grid, zero in the gaps.
+    """
     x = w - w.mean(axis=0)
-    n = t.size
-    dt = (t[-1] - t[0]) / (n - 1)
-    spec = np.sum(np.abs(np.fft.rfft(x * np.hanning(n)[:, None], axis=0)) ** 2, axis=1)
+    idx, dt = _grid_index(t)
+    n = int(idx[-1]) + 1
+    if n != t.size:
+        grid = np.zeros((n, x.shape[1]))
+        grid[idx] = x
+    else:
+        grid = x
+    spec = np.sum(np.abs(np.fft.rfft(grid * np.hanning(n)[:, None], axis=0)) ** 2, axis=1)
     spec[0] = 0.0
     k = int(np.argmax(spec))
     if k < 1 or spec[k] <= 0:
@@ -219,11 +249,20 @@ def extract_harmonics(
         if omega * rec.duration < 2 * np.pi:
             raise DataError(f"{rec.name}: at least one period expected; found "
                             f"{omega * rec.duration / (2 * np.pi):.2f} periods")
-        seg_len = max(int(round(segment_periods * 2 * np.pi / omega / rec.dt)), 4 * n_c)
-        n_seg = max(1, t.size // seg_len)
+        idx, dt = _grid_index(t)          # 0..n-1 without gaps
+        n_grid = int(idx[-1]) + 1
+        seg_len = max(int(round(segment_periods * 2 * np.pi / omega / dt)), 4 * n_c)
+        n_seg = max(1, n_grid // seg_len)
+        # segments by grid index (by time); a segment left with too few samples is skipped
+        cuts = np.searchsorted(idx, np.arange(n_seg + 1) * seg_len)
+        cuts[-1] = t.size
+        slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+                  if b - a >= 4 * n_c]
+        if not slices:
+            slices = [slice(0, t.size)]
+        n_seg = len(slices)
         seg, seg_om = [], []
-        for s in range(n_seg):
-            sl = slice(s * seg_len, (s + 1) * seg_len if s < n_seg - 1 else t.size)
+        for sl in slices:
             A = time_design(t[sl], omega, n_harmonics)
             seg.append(np.linalg.lstsq(A, w[sl], rcond=None)[0].T)
             if n_seg > 1:  # the segment's own frequency, for the frequency's spread

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import FitError
 from bayeshopf.model import collapsed as cm
@@ -214,6 +215,7 @@ def fit_channel(
             channel, the recordings do not match the fit, or a recording lies
             off every predicted branch.
     """
+    ensure_x64()
     if channel in recordings.planar:
         raise FitError(f"channel {channel!r} is one of the planar pair {recordings.planar}; "
                        "expected a further channel")

@@ -34,6 +34,7 @@ from numpyro.infer import MCMC, NUTS, SVI, Predictive, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
@@ -68,6 +69,7 @@ class CollapsedSettings:
             correlated: on the rig it halves the tree size and doubles the ESS
             per draw against a diagonal one; ``benchmarks/nuts_mass.json``).
         target_accept: NUTS's target acceptance probability during warm-up.
+        max_tree_depth: NUTS's largest tree depth (``2**depth − 1`` leapfrog steps).
         svi_steps: SVI steps (``inference="svi"``).
         n_svi_draws: Draws of the SVI posterior.
         lbfgs_steps: Most L-BFGS steps of the MAP.
@@ -87,6 +89,7 @@ class CollapsedSettings:
     num_samples: int = 500
     dense_mass: bool = True
     target_accept: float = 0.8
+    max_tree_depth: int = 10
     svi_steps: int = 3000
     n_svi_draws: int = 2000
     lbfgs_steps: int = 300
@@ -184,6 +187,7 @@ class MapPoint:
 
 def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     """Deterministic start (grid over the gaps), then L-BFGS to the MAP (module docstring)."""
+    ensure_x64()
     spec = kwargs["spec"]
     init = _initial_values(spec)
     info = initialize_model(jax.random.PRNGKey(0), cm.collapsed_model, model_kwargs=kwargs,
@@ -240,7 +244,8 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
     mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent),
                      dense_mass=settings.dense_mass,
-                     target_accept_prob=settings.target_accept),
+                     target_accept_prob=settings.target_accept,
+                     max_tree_depth=settings.max_tree_depth),
                 num_warmup=settings.num_warmup, num_samples=settings.num_samples,
                 num_chains=settings.num_chains, chain_method="sequential", progress_bar=False)
     # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
@@ -351,6 +356,7 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
                      seed: int = 0, progress: bool = True, method: str | None = None
                      ) -> PosteriorRun:
     """NUTS or SVI from the MAP point, then one exact map draw per posterior draw."""
+    ensure_x64()
     method = method or settings.inference
     if method not in ("nuts", "svi"):
         raise FitError(f"inference must be 'nuts' or 'svi'; got {method!r}")
@@ -402,6 +408,7 @@ def compare_with_nuts(post, *, seed: int = 0, progress: bool = True) -> dict:
         ``{"convergence": R̂ and ESS of the NUTS chains, "sites": the interval
         agreement of SVI with NUTS per site, "agree": all sites agree}``.
     """
+    ensure_x64()
     kwargs = model_arguments(post.spec, post.features)
     ref = sample_posterior(kwargs, post.map_point, post.settings, seed=seed + 1,
                            progress=progress, method="nuts")

@@ -4,9 +4,17 @@ Every plotting function is pure: it takes result records (a
 :class:`~bayeshopf.diagnostics.bifurcation.BifurcationDiagram`, posterior draws,
 a :class:`~bayeshopf.diagnostics.ppc.PosteriorPredictiveCheck`, ...) and returns
 a new :class:`matplotlib.figure.Figure` that is not registered with pyplot, so
-no global matplotlib state (current figure, rcParams) is read or changed.
-:func:`save_figure` writes a figure atomically and :func:`plot_all` draws the
-standard set of a fit (:class:`~bayeshopf.posterior.HybridPosterior`).
+no global matplotlib state (current figure, rcParams) is read or changed; or,
+given ``ax=`` (one Axes, or one per panel), draws into those and returns their
+figure. :func:`save_figure` writes a figure atomically in the format of its
+suffix (``.png``, ``.pdf``, ``.svg``) and :func:`plot_all` draws the standard
+set of a fit (:class:`~bayeshopf.posterior.HybridPosterior`, or
+``load_fit(DIR).posterior``).
+
+The measured points carry the measurement's own uncertainty (the interval of
+the mean over a recording's segments), not the model's; phase portraits and
+time series are drawn about each recording's mean (``offsets="remove"``);
+``length_unit="mm"`` (``angle_unit="deg"``) rescales lengths (angles).
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.plotting._io import save_figure
+from bayeshopf.plotting._units import readable_length
 from bayeshopf.plotting.diagram import plot_bifurcation
 from bayeshopf.plotting.phase import plot_phase_portraits
 from bayeshopf.plotting.ppc import coefficient_labels, plot_ppc
@@ -81,72 +90,99 @@ def default_zoom(fit, mu: np.ndarray) -> tuple[float, float]:
     return max(centre - half, float(mu.min())), min(centre + half, float(mu.max()))
 
 
+def _named(names, fmt: str) -> list[str]:
+    return [str(Path(n).with_suffix(f".{fmt}")) for n in names]
+
+
 def plot_all(
     fit,
-    recordings: RecordingSet,
+    recordings: RecordingSet | None,
     out_dir: str | os.PathLike[str],
     truth=None,
     *,
     zoom: bool = True,
     dpi: int = 150,
+    fmt: str = "png",
+    ci: float = 0.9,
+    length_unit: str | None = "auto",
+    angle_unit: str | None = None,
+    offsets: str = "remove",
 ) -> list[Path]:
     """Draw and save the standard figures of a fit.
 
     Writes ``bifurcation.png`` (:func:`plot_bifurcation` with the training
-    amplitudes), ``phase_portraits.png`` (:func:`plot_phase_portraits`) and
-    ``ppc.png`` (:func:`plot_ppc`) into ``out_dir``, each atomically; for a fit
-    with a frequency model also ``frequency.png`` (:func:`plot_frequency`, curve
-    and predictive bands with the measured frequencies) and ``time_series.png``
-    (:func:`plot_time_series`, z1 over four periods of each recording).
+    amplitudes and their measured spread, and P(exists)), ``phase_portraits.png``
+    (:func:`plot_phase_portraits`) and ``ppc.png`` (:func:`plot_ppc`) into
+    ``out_dir``, each atomically; for a fit with a frequency model also
+    ``frequency.png`` (:func:`plot_frequency`, curve and predictive bands with
+    the measured frequencies) and ``time_series.png`` (:func:`plot_time_series`,
+    z1 over four periods of each recording). Without ``recordings`` the phase
+    portraits and time series, which need the raw records, are left out.
 
     Args:
-        fit: A :class:`~bayeshopf.posterior.HybridPosterior`.
-        recordings: The recordings it was fitted to (for the phase portraits).
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior` (fitted, or
+            ``load_fit(DIR).posterior``).
+        recordings: The recordings it was fitted to, in its order, or ``None``.
         out_dir: Destination folder (created if missing).
         truth: Optional planted system
             (:class:`~bayeshopf.data.synthetic.PlantedHopf`) whose amplitude
             curve and orbits are overlaid.
         zoom: Add an inset magnifying the diagram about the stable recording
             of largest μ (:func:`default_zoom`), placed where it hides nothing.
-        dpi: Resolution of the PNG files.
+        dpi: Resolution of raster files.
+        fmt: File format: ``"png"``, ``"pdf"`` or ``"svg"`` (vector).
+        ci: Level of the bands and intervals.
+        length_unit: Unit of lengths (``"mm"``, …), ``None`` for the fit's
+            own, or ``"auto"``: the one of m, mm, µm in which the largest
+            measured amplitude reads 1–1000.
+        angle_unit: Unit of angles (``"deg"``, …), ``None`` for the fit's own.
+        offsets: ``"remove"`` or ``"keep"`` each recording's mean in the phase
+            portraits and time series.
 
     Returns:
         The paths written, in the order of :data:`FIGURE_NAMES` (then
-        :data:`FREQUENCY_FIGURE_NAMES`).
+        :data:`FREQUENCY_FIGURE_NAMES`), less those that need recordings when
+        there are none.
     """
+    if fmt not in ("png", "pdf", "svg"):
+        raise ValueError(f"fmt must be 'png', 'pdf' or 'svg'; got {fmt!r}")
     out = Path(out_dir)
     z1 = fit.spec.frame.names[0]
     amp_label = f"peak-to-peak of {z1}"
-    ppc = fit.ppc()
+    if length_unit == "auto":
+        length_unit = readable_length(fit.amplitude_units,
+                                      float(np.max(np.abs(fit.features.amplitude))))
+    units = dict(length_unit=length_unit, angle_unit=angle_unit)
+    ppc = fit.ppc(ci)
     mu = diagram_grid(fit)
-    diagram = fit.diagram(mu)
+    diagram = fit.diagram(mu, ci)
     amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
     orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
-    figures = [
-        plot_bifurcation(
-            diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
-            amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
-            zoom=default_zoom(fit, mu) if zoom else None,
-        ),
-        plot_phase_portraits(fit, recordings, truth=orbit_truth),
-        plot_ppc(ppc, amplitude_units=fit.amplitude_units, amplitude_label=amp_label),
-    ]
-    names = list(FIGURE_NAMES)
+    figures = [(FIGURE_NAMES[0], plot_bifurcation(
+        diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
+        amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
+        zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit))]
+    if recordings is not None:
+        figures.append((FIGURE_NAMES[1], plot_phase_portraits(
+            fit, recordings, truth=orbit_truth, offsets=offsets, **units)))
+    figures.append((FIGURE_NAMES[2], plot_ppc(ppc, amplitude_units=fit.amplitude_units,
+                                              amplitude_label=amp_label,
+                                              length_unit=length_unit)))
     if fit.has_frequency:
         bands, pred = [], []
         branches = ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
         for b in branches:
-            bands.append(fit.frequency_band(mu, b))
-            pred.append(fit.frequency_band(mu, b, predictive=True))
+            bands.append(fit.frequency_band(mu, b, ci=ci))
+            pred.append(fit.frequency_band(mu, b, predictive=True, ci=ci))
         f = fit.features
-        measured = [(m, hz, "unstable" if u else "stable")
-                    for m, hz, u in zip(f.mu, f.frequency_hz, f.unstable, strict=True)]
-        figures += [
-            plot_frequency(bands, measured, predictive=pred, mu_label=fit.mu_label,
-                           mu_units=fit.mu_units),
-            plot_time_series(fit.time_series_bands(recordings), mu_label=fit.mu_label,
-                             mu_units=fit.mu_units),
-        ]
-        names += FREQUENCY_FIGURE_NAMES
-    return [save_figure(fig, out / name, dpi=dpi)
-            for fig, name in zip(figures, names, strict=True)]
+        measured = [(m, hz, "unstable" if u else "stable", se / (2 * np.pi))
+                    for m, hz, u, se in zip(f.mu, f.frequency_hz, f.unstable, f.omega_se,
+                                            strict=True)]
+        figures.append((FREQUENCY_FIGURE_NAMES[0], plot_frequency(
+            bands, measured, predictive=pred, mu_label=fit.mu_label, mu_units=fit.mu_units,
+            ci=ci)))
+        if recordings is not None:
+            figures.append((FREQUENCY_FIGURE_NAMES[1], plot_time_series(
+                fit.time_series_bands(recordings, ci=ci), mu_label=fit.mu_label,
+                mu_units=fit.mu_units, offsets=offsets, ci=ci, **units)))
+    return [save_figure(fig, out / _named([name], fmt)[0], dpi=dpi) for name, fig in figures]

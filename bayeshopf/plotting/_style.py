@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
@@ -47,3 +48,42 @@ def tag(container, gid: str) -> None:
 def marker_face(branch: str) -> str:
     """Face colour of a branch's measurement marker (open for unstable)."""
     return BRANCH_COLOURS[branch] if branch == "stable" else "white"
+
+
+def panels(ax, n: int, make) -> tuple[Figure, list[Axes]]:
+    """The figure and ``n`` axes to draw into.
+
+    Args:
+        ax: ``None`` (new axes from ``make()``, which returns ``(figure, axes)``),
+            one :class:`~matplotlib.axes.Axes` (for ``n == 1``), or a sequence or
+            array of at least ``n`` axes of one figure (any beyond ``n`` are hidden).
+        n: Panels needed.
+        make: Makes a new figure and its axes.
+
+    Raises:
+        ValueError: When ``ax`` holds fewer than ``n`` axes.
+    """
+    if ax is None:
+        fig, axes = make()
+        return fig, list(np.ravel(np.asarray(axes, dtype=object)))
+    if isinstance(ax, Axes):
+        axes = [ax]
+    else:
+        axes = list(np.ravel(np.asarray(ax, dtype=object)))
+    if len(axes) < n or not all(isinstance(a, Axes) for a in axes):
+        raise ValueError(f"ax: expected {n} matplotlib Axes (one per panel); got {len(axes)}")
+    for a in axes[n:]:
+        a.set_visible(False)
+    return axes[0].figure, axes
+
+
+def z_value(ci: float) -> float:
+    """Half-width in standard deviations of the central ``ci`` interval of a normal."""
+    from scipy.stats import norm
+
+    return float(norm.ppf(0.5 + ci / 2))
+
+
+def ci_label(ci: float) -> str:
+    """``"90%"`` for 0.9 (one decimal where needed: ``"97.5%"``)."""
+    return f"{100 * ci:.3g}%"

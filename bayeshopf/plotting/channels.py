@@ -15,12 +15,13 @@ from bayeshopf.plotting._style import (
     axis_label,
     marker_face,
     new_figure,
+    panels,
     style_axes,
 )
 
 
 def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
-                 max_points: int = 1500) -> Figure:
+                 max_points: int = 1500, ax=None) -> Figure:
     """Measured channel against normal-form phase per recording, and its amplitude against μ.
 
     Each recording's panel shows the measured samples placed on the predicted
@@ -35,6 +36,8 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
         mu_grid: μ grid of the amplitude panel.
         n_cols: Panels per row.
         max_points: Measured samples drawn per panel.
+        ax: Axes to draw into, one per recording and one for the amplitudes
+            (a sequence or array; extra ones hidden); a new figure when ``None``.
 
     Returns:
         The figure.
@@ -42,8 +45,12 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
     feats = fit_.features
     n_rec = len(feats.names)
     n_rows = int(np.ceil((n_rec + 1) / n_cols))
-    fig = new_figure(3.0 * n_cols, 2.5 * n_rows)
-    axes = fig.subplots(n_rows, n_cols, squeeze=False).ravel()
+
+    def make():
+        f = new_figure(3.0 * n_cols, 2.5 * n_rows)
+        return f, f.subplots(n_rows, n_cols, squeeze=False).ravel()
+
+    fig, axes = panels(ax, n_rec + 1, make)
     units = channel_fit.units
     phi = np.linspace(0.0, 2.0 * np.pi, 128, endpoint=False)
     for i, ax in enumerate(axes[:n_rec]):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -21,11 +22,14 @@ from bayeshopf.plotting._style import (
     LEGEND_SIZE,
     TICK_SIZE,
     axis_label,
+    ci_label,
     marker_face,
     new_figure,
     style_axes,
     tag,
+    z_value,
 )
+from bayeshopf.plotting._units import convert
 
 #: Callable giving the true amplitude, ``truth(mu, branch) -> amplitude``.
 AmplitudeTruth = Callable[[np.ndarray, str], np.ndarray]
@@ -72,10 +76,41 @@ def _masked(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return np.where(keep, values, np.nan)
 
 
+def _next_to(alive: np.ndarray) -> np.ndarray:
+    """Points next to an ``alive`` point (either side)."""
+    out = np.zeros_like(alive)
+    out[1:] |= alive[:-1]
+    out[:-1] |= alive[1:]
+    return out
+
+
+def drawn_quantiles(band: BranchBand, min_p_exists: float = 0.5) -> np.ndarray:
+    """The band's quantile rows as drawn, ``(5, n_mu)``, ``nan`` where not drawn.
+
+    Where the branch exists in at least ``min_p_exists`` of the draws, its
+    quantiles; a branch that ends at the Hopf point is continued there with
+    :attr:`~bayeshopf.diagnostics.bifurcation.BranchBand.to_hopf` (the draws
+    past their Hopf point at amplitude 0), each band ending at the first μ
+    where its upper edge, and the median where it, reaches 0.
+    """
+    if band.to_hopf is None or band.p_to_hopf is None:
+        keep = np.asarray(band.p_exists) >= min_p_exists
+        return _masked(np.asarray(band.quantiles, float), keep)
+    h = np.asarray(band.to_hopf, float)
+    keep = np.asarray(band.p_to_hopf) >= min_p_exists
+    out = np.full_like(h, np.nan)
+    for rows, ref in (((0, 4), 4), ((1, 3), 3), ((2,), 2)):
+        alive = keep & (h[ref] > 0)
+        ends = keep & (h[ref] == 0) & _next_to(alive)
+        for r in rows:
+            out[r] = np.where(alive | ends, h[r], np.nan)
+    return out
+
+
 def _draw_band(ax: Axes, branch: str, band: BranchBand, min_p_exists: float) -> None:
     colour = BRANCH_COLOURS[branch]
     keep = np.asarray(band.p_exists) >= min_p_exists
-    q = _masked(np.asarray(band.quantiles, float), keep)
+    q = drawn_quantiles(band, min_p_exists)
     mu = np.asarray(band.mu, float)
     ok90 = np.isfinite(q[0]) & np.isfinite(q[4])
     ok50 = np.isfinite(q[1]) & np.isfinite(q[3])
@@ -90,7 +125,7 @@ def _draw_band(ax: Axes, branch: str, band: BranchBand, min_p_exists: float) -> 
         ax.plot(mu, row, color=colour, lw=0.8, ls=":", gid=f"{branch}-predictive")
 
 
-def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck) -> None:
+def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck, bars: str = "measured") -> None:
     mu = np.asarray(ppc.mu, float)
     unstable = np.asarray(ppc.unstable, bool)
     measured = np.asarray(ppc.measured, float)
@@ -98,12 +133,20 @@ def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck) -> None:
         if not mask.any():
             continue
         colour = BRANCH_COLOURS[branch]
-        ivs = [iv for iv, m in zip(ppc.predictive, mask, strict=True) if m]
-        med = np.array([iv.median for iv in ivs])
-        err = np.array([[iv.median - iv.lo for iv in ivs], [iv.hi - iv.median for iv in ivs]])
-        bars = ax.errorbar(mu[mask], med, yerr=err, fmt="none", ecolor=colour, elinewidth=1.0,
-                           capsize=2.5, capthick=1.0, zorder=4)
-        tag(bars, f"{branch}-measured-interval")
+        if bars == "predictive":
+            ivs = [iv for iv, m in zip(ppc.predictive, mask, strict=True) if m]
+            centre = np.array([iv.median for iv in ivs])
+            err = np.array([[iv.median - iv.lo for iv in ivs],
+                            [iv.hi - iv.median for iv in ivs]])
+        elif ppc.measured_se is not None:
+            centre = measured[mask]
+            err = z_value(ppc.ci) * np.asarray(ppc.measured_se, float)[mask]
+        else:
+            centre = err = None
+        if centre is not None:
+            eb = ax.errorbar(mu[mask], centre, yerr=err, fmt="none", ecolor=colour,
+                             elinewidth=1.0, capsize=2.5, capthick=1.0, zorder=4)
+            tag(eb, f"{branch}-measured-interval")
         ax.plot(mu[mask], measured[mask], ls="none", marker=BRANCH_MARKERS[branch], ms=5,
                 mfc=marker_face(branch), mec=colour, mew=1.2, zorder=5,
                 gid=f"{branch}-measured")
@@ -162,48 +205,68 @@ def _draw_points(ax: Axes, diagram: BifurcationDiagram) -> None:
         tag(fold, "fold")
 
 
-def _draw_all(ax, diagram, ppc, truth_curves, min_p_exists) -> None:
+def _draw_all(ax, diagram, ppc, truth_curves, min_p_exists, bars="measured") -> None:
     for branch, band in _branches(diagram):
         _draw_band(ax, branch, band, min_p_exists)
     if ppc is not None:
-        _draw_measured(ax, ppc)
+        _draw_measured(ax, ppc, bars)
     for mu, amp in truth_curves:
         ax.plot(mu, amp, color="k", lw=0.6, zorder=6, gid="truth")
     _draw_points(ax, diagram)
 
 
-def _legend_entries(diagram, ppc, truth_curves, mu_units) -> tuple[list, list[str]]:
+def _legend_entries(diagram, ppc, truth_curves, mu_units, bars="measured"
+                    ) -> tuple[list, list[str]]:
     handles: list = []
     labels: list[str] = []
     branches = _branches(diagram)
+    ci = ci_label(diagram.stable.ci)
     for branch, _ in branches:
         handles.append(_BandKey(BRANCH_COLOURS[branch], _LINESTYLES[branch]))
-        labels.append(f"{branch} branch: median, 50% and 90% CI")
+        labels.append(f"{branch} branch: median, 50% and {ci} CI")
     handles.append(tuple(Line2D([], [], color=BRANCH_COLOURS[b], lw=0.8, ls=":")
                          for b, _ in branches))
-    labels.append("90% predictive band, new recording")
+    labels.append(f"{ci} predictive band, new recording")
     if ppc is not None:
+        what = (f"{ci_label(ppc.ci)} predictive interval" if bars == "predictive"
+                else f"{ci_label(ppc.ci)} CI over segments"
+                if ppc.measured_se is not None else "")
         unstable = np.asarray(ppc.unstable, bool)
         for branch, present in (("stable", (~unstable).any()), ("unstable", unstable.any())):
             if not present:
                 continue
             c = BRANCH_COLOURS[branch]
-            handles.append(Line2D([], [], ls="-", lw=1.0, color=c, marker=BRANCH_MARKERS[branch],
-                                  ms=5, mfc=marker_face(branch), mec=c, mew=1.2))
-            labels.append(f"measured, {branch} (90% predictive interval)")
+            handles.append(Line2D([], [], ls="-" if what else "none", lw=1.0, color=c,
+                                  marker=BRANCH_MARKERS[branch], ms=5, mfc=marker_face(branch),
+                                  mec=c, mew=1.2))
+            labels.append(f"measured, {branch}" + (f" ({what})" if what else ""))
     if truth_curves:
         handles.append(Line2D([], [], color="k", lw=0.6))
         labels.append("true")
     point = dict(color="k", mfc="white", mew=1.2, ms=6, ls="none")
     handles.append(Line2D([], [], marker="D", **point))
-    labels.append(f"Hopf point (90% CI): {_fmt_interval(diagram.mu0, mu_units)}")
+    labels.append(f"Hopf point ({ci_label(diagram.mu0.mass)} CI): "
+                  f"{_fmt_interval(diagram.mu0, mu_units)}")
     if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
         handles.append(Line2D([], [], marker="^", **point))
-        labels.append(f"fold (90% CI): {_fmt_interval(diagram.mu_fold, mu_units)}")
+        labels.append(f"fold ({ci_label(diagram.mu_fold.mass)} CI): "
+                      f"{_fmt_interval(diagram.mu_fold, mu_units)}")
     return handles, labels
 
 
-def _zoom_ylim(diagram, ppc, truth_curves, window) -> tuple[float, float] | None:
+def _bar_ends(ppc: PosteriorPredictiveCheck, bars: str) -> np.ndarray:
+    """Lower and upper ends of the measured points' bars, ``(2, n_rec)``."""
+    if bars == "predictive":
+        return np.array([[iv.lo for iv in ppc.predictive], [iv.hi for iv in ppc.predictive]])
+    m = np.asarray(ppc.measured, float)
+    if ppc.measured_se is None:
+        return np.array([m, m])
+    e = z_value(ppc.ci) * np.asarray(ppc.measured_se, float)
+    return np.array([m - e, m + e])
+
+
+def _zoom_ylim(diagram, ppc, truth_curves, window, bars="measured"
+               ) -> tuple[float, float] | None:
     """The y range of everything drawn inside the μ window (wild predictive values ignored)."""
     lo, hi = window
     ys = []
@@ -217,8 +280,7 @@ def _zoom_ylim(diagram, ppc, truth_curves, window) -> tuple[float, float] | None
     if ppc is not None:
         inside = (ppc.mu >= lo) & (ppc.mu <= hi)
         ys.append(np.asarray(ppc.measured, float)[inside])
-        ys.append(np.array([v for iv, k in zip(ppc.predictive, inside, strict=True) if k
-                            for v in (iv.lo, iv.hi)], float))
+        ys.append(_bar_ends(ppc, bars)[:, inside].ravel())
     for mu, amp in truth_curves:
         ys.append(amp[(mu >= lo) & (mu <= hi)])
     y = np.concatenate(ys) if ys else np.array([])
@@ -270,6 +332,49 @@ def _free_corner(ax: Axes, points: np.ndarray):
     return None
 
 
+def scale_diagram(diagram: BifurcationDiagram, factor: float) -> BifurcationDiagram:
+    """The diagram with every amplitude multiplied by ``factor`` (a change of unit)."""
+    def band(b):
+        if b is None:
+            return None
+        return dataclasses.replace(
+            b, quantiles=np.asarray(b.quantiles) * factor,
+            predictive=np.asarray(b.predictive) * factor,
+            to_hopf=None if b.to_hopf is None else np.asarray(b.to_hopf) * factor)
+
+    fa = diagram.fold_amplitude
+    return dataclasses.replace(
+        diagram, stable=band(diagram.stable), unstable=band(diagram.unstable),
+        fold_amplitude=None if fa is None else dataclasses.replace(
+            fa, median=fa.median * factor, lo=fa.lo * factor, hi=fa.hi * factor))
+
+
+def scale_ppc(ppc: PosteriorPredictiveCheck, factor: float) -> PosteriorPredictiveCheck:
+    """The check with every amplitude multiplied by ``factor`` (a change of unit)."""
+    def ivs(items):
+        return tuple(dataclasses.replace(iv, median=iv.median * factor, lo=iv.lo * factor,
+                                         hi=iv.hi * factor) for iv in items)
+
+    return dataclasses.replace(
+        ppc, measured=np.asarray(ppc.measured, float) * factor, curve=ivs(ppc.curve),
+        predictive=ivs(ppc.predictive),
+        measured_se=None if ppc.measured_se is None
+        else np.asarray(ppc.measured_se, float) * factor)
+
+
+def _draw_p_exists(ax: Axes, diagram: BifurcationDiagram) -> None:
+    """Each branch's posterior probability of existence against μ."""
+    style_axes(ax)
+    for branch, band in _branches(diagram):
+        ax.plot(band.mu, band.p_exists, color=BRANCH_COLOURS[branch], lw=1.2,
+                ls=_LINESTYLES[branch], gid=f"{branch}-p-exists")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_yticks([0, 1])
+    ax.minorticks_off()
+    ax.set_ylabel("P(exists)", fontsize=LABEL_SIZE - 1)
+    ax.tick_params(labelbottom=False)
+
+
 def plot_bifurcation(
     diagram: BifurcationDiagram,
     ppc: PosteriorPredictiveCheck | None = None,
@@ -284,32 +389,40 @@ def plot_bifurcation(
     zoom: tuple[float, float] | None = None,
     zoom_bounds: tuple[float, float, float, float] | str = "auto",
     ax: Axes | None = None,
+    p_exists: bool | Axes | str = "auto",
+    bars: str = "measured",
+    length_unit: str | None = None,
 ) -> Figure:
     """Plot the posterior bifurcation diagram (amplitude against μ).
 
     Each branch is drawn in its own colour (stable C0, unstable C3): its
     posterior median as a line (solid stable, dashed unstable), its 50% credible
-    band darker and 90% band lighter, and the 90% posterior predictive band of a
-    new recording (curve uncertainty plus scatter) as thin dotted lines. A
-    branch is drawn only where it exists in at least ``min_p_exists`` of the
-    draws (by default half, so the branches end at the median Hopf and fold
-    points, whose uncertainty the error bars show); the quantiles there are
-    over the draws in which it exists. The Hopf point is marked at amplitude
-    zero and the fold at its amplitude, each with its 90% interval as error
-    bars. The y range follows the credible bands and the data; predictive
-    quantiles beyond it are clipped.
+    band darker and its outer band (the diagram's level, 90% by default)
+    lighter, and the predictive band of a new recording (curve uncertainty plus
+    scatter) as thin dotted lines. A branch is drawn where it exists in at
+    least ``min_p_exists`` of the draws (by default half, so it ends at the
+    median fold), the quantiles there over the draws in which it exists; a
+    branch that ends at the Hopf point (the unstable one of a subcritical
+    system) is drawn on to amplitude 0 there, the draws past their own Hopf
+    point counted at zero amplitude (:func:`drawn_quantiles`), so it meets the
+    Hopf marker and its band fans out over the Hopf point's interval. The Hopf
+    point is marked at amplitude zero and the fold at its amplitude, each with
+    its interval as error bars. A thin panel above shows each branch's
+    posterior probability of existence. The y range follows the credible
+    bands and the data; predictive quantiles beyond it are clipped.
 
     Args:
         diagram: The posterior diagram (:meth:`~bayeshopf.posterior.HybridPosterior.diagram`).
         ppc: Posterior predictive check of the training recordings; when given,
             the measured amplitudes are drawn as markers (filled circles stable,
-            open squares unstable) with each recording's 90% predictive interval.
+            open squares unstable) with error bars (``bars``).
         mu_label: Name of μ for the x axis.
         mu_units: Unit of μ.
         amplitude_units: Unit of the amplitude (that of z1).
         amplitude_label: y-axis text; default ``"peak-to-peak of z1"``.
         truth: Optional ``truth(mu, branch) -> amplitude`` drawn as thin black
-            lines (e.g. the planted system of a synthetic data set).
+            lines (e.g. the planted system of a synthetic data set), in
+            ``amplitude_units``.
         min_p_exists: Smallest posterior probability of existence at which a
             branch's band is drawn.
         legend: Whether to add a legend (below the axes).
@@ -320,15 +433,48 @@ def plot_bifurcation(
             upper left, lower left, upper right) clear of the curves and
             markers; no inset is drawn when none is clear.
         ax: Axes to draw into; a new figure is made when ``None``.
+        p_exists: The panel of P(exists): ``"auto"`` (drawn above the diagram
+            in a new figure, left out when ``ax`` is given), ``True``/``False``,
+            or the axes to draw it into. ``True`` with ``ax`` given puts it in a
+            strip above ``ax``.
+        bars: Error bars of the measured points: ``"measured"`` (default) the
+            measurement's own uncertainty, the interval of the mean over the
+            recording's segments at the check's level (±z·``ppc.measured_se``;
+            none for a record of one segment); ``"predictive"`` the model's
+            predictive interval of that recording, centred on its median.
+        length_unit: Draw the amplitudes in this length unit (``"mm"``, ``"cm"``,
+            ``"µm"``, ``"m"``) when ``amplitude_units`` is a length.
 
     Returns:
         The figure holding the axes.
     """
+    if bars not in ("measured", "predictive"):
+        raise ValueError(f"bars must be 'measured' or 'predictive'; got {bars!r}")
+    factor, amplitude_units = convert(amplitude_units, length_unit)
+    if factor != 1.0:
+        diagram = scale_diagram(diagram, factor)
+        ppc = None if ppc is None else scale_ppc(ppc, factor)
+        if truth is not None:
+            truth_in_units = truth
+
+            def truth(m, b):
+                return np.asarray(truth_in_units(m, b), float) * factor
+    p_ax = None
     if ax is None:
-        fig = new_figure(6.4, 5.0)
-        ax = fig.add_subplot()
+        if p_exists is False:
+            fig = new_figure(6.4, 5.0)
+            ax = fig.add_subplot()
+        else:
+            fig = new_figure(6.4, 5.6)
+            grid = fig.add_gridspec(2, 1, height_ratios=(1, 6))
+            ax = fig.add_subplot(grid[1])
+            p_ax = fig.add_subplot(grid[0], sharex=ax)
     else:
         fig = ax.figure
+        if isinstance(p_exists, Axes):
+            p_ax = p_exists
+        elif p_exists is True:
+            p_ax = ax.inset_axes([0.0, 1.04, 1.0, 0.16], sharex=ax)
     style_axes(ax)
     mu_all = np.asarray(diagram.stable.mu, float)
     mu_lo, mu_hi = float(mu_all.min()), float(mu_all.max())
@@ -339,7 +485,9 @@ def plot_bifurcation(
             if curve is not None:
                 truth_curves.append(curve)
 
-    _draw_all(ax, diagram, ppc, truth_curves, min_p_exists)
+    _draw_all(ax, diagram, ppc, truth_curves, min_p_exists, bars)
+    if p_ax is not None:
+        _draw_p_exists(p_ax, diagram)
 
     # The y range follows the credible bands and the data, not the predictive
     # band, so that a few wild predictive quantiles cannot flatten the figure.
@@ -347,7 +495,7 @@ def plot_bifurcation(
     if diagram.fold_amplitude is not None:
         top = max(top, _finite_max(np.array([diagram.fold_amplitude.hi])))
     if ppc is not None:
-        top = max(top, float(np.max(ppc.measured)), max(iv.hi for iv in ppc.predictive))
+        top = max(top, float(np.max(ppc.measured)), _finite_max(_bar_ends(ppc, bars)[1]))
     top = float(top) if np.isfinite(top) and top > 0 else 1.0
     ax.set_xlim(mu_lo, mu_hi)
     ax.set_ylim(-0.04 * top, 1.08 * top)
@@ -356,13 +504,13 @@ def plot_bifurcation(
                   fontsize=LABEL_SIZE)
 
     if zoom is not None:
-        ylim = _zoom_ylim(diagram, ppc, truth_curves, zoom)
+        ylim = _zoom_ylim(diagram, ppc, truth_curves, zoom, bars)
         bounds = zoom_bounds
         if isinstance(zoom_bounds, str):
             bounds = _free_corner(ax, _drawn_points(diagram, ppc, truth_curves))
         if ylim is not None and bounds is not None:
             inset = ax.inset_axes(list(bounds))
-            _draw_all(inset, diagram, ppc, truth_curves, min_p_exists)
+            _draw_all(inset, diagram, ppc, truth_curves, min_p_exists, bars)
             style_axes(inset, grid=False)
             inset.minorticks_off()
             inset.tick_params(labelsize=TICK_SIZE - 1.5, pad=2)
@@ -373,7 +521,7 @@ def plot_bifurcation(
             ax.indicate_inset_zoom(inset, edgecolor="0.4", alpha=0.8, lw=0.6)
 
     if legend:
-        handles, labels = _legend_entries(diagram, ppc, truth_curves, mu_units)
+        handles, labels = _legend_entries(diagram, ppc, truth_curves, mu_units, bars)
         ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
                   fontsize=LEGEND_SIZE, frameon=False, handlelength=3.0, handleheight=1.5,
                   columnspacing=1.5,

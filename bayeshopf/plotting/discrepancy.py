@@ -15,6 +15,7 @@ from bayeshopf.plotting._style import (
     LEGEND_SIZE,
     TITLE_SIZE,
     new_figure,
+    panels,
     style_axes,
 )
 
@@ -26,18 +27,22 @@ def _branch_curves(diagram, channel: str):
         yield b.kind, np.asarray(b.mu), np.asarray(b.amplitude[channel])
 
 
-def plot_discrepancy_diagram(report):
+def plot_discrepancy_diagram(report, ax=None):
     """Peak-to-peak of the reference channel against μ: simulator, simulator + term, recordings.
 
     The recordings' amplitudes are the measured ones (offsets do not change a
     peak-to-peak); the Bayesian hybrid fit's 90% band is drawn when the
-    analysis ran it.
+    analysis ran it. ``ax``: the axes to draw into (a new figure when ``None``).
     """
     mf = report.extras["features"]
     ch = mf.layout.channels[0]
     system = report.system
-    fig = new_figure(6.0, 4.0)
-    ax = fig.add_subplot()
+
+    def make():
+        f = new_figure(6.0, 4.0)
+        return f, [f.add_subplot()]
+
+    fig, (ax,) = panels(ax, 1, make)
     before, after = report.extras["before"], report.extras["after"]
     hyb = report.extras.get("hybrid")
     if hyb is not None:
@@ -80,12 +85,14 @@ def plot_discrepancy_diagram(report):
     return fig
 
 
-def plot_orbit_residuals(report):
+def plot_orbit_residuals(report, ax=None):
     """Residual along the orbit (measured − simulated, offsets removed), before and after.
 
     One row per recording, one column per channel; the residual is in units of
     the channel and the grey band is ± the model-error floor plus noise of the
-    first harmonic.
+    first harmonic. ``ax``: the axes to draw into, rows × columns (an array of
+    that shape or a flat sequence in row order; the legend then goes on the
+    first), or ``None`` for a new figure.
     """
     from bayeshopf.discrepancy.locate import N_THETA, curve
 
@@ -98,8 +105,14 @@ def plot_orbit_residuals(report):
     ys1 = fitter.features(best.orbits)
     off0, off1 = fitter.offsets(base), fitter.offsets(best.orbits)
     R, C = len(mf.names), len(lay.channels)
-    fig = new_figure(2.6 * C + 0.5, 1.05 * R + 0.6)
-    axes = fig.subplots(R, C, sharex=True, squeeze=False)
+
+    def make():
+        f = new_figure(2.6 * C + 0.5, 1.05 * R + 0.6)
+        return f, f.subplots(R, C, sharex=True, squeeze=False)
+
+    own = ax is None
+    fig, flat = panels(ax, R * C, make)
+    axes = np.asarray(flat[: R * C], dtype=object).reshape(R, C)
     th = 360.0 * np.arange(N_THETA) / N_THETA
     term = best.term.name
     for r in range(R):
@@ -135,7 +148,10 @@ def plot_orbit_residuals(report):
             if l_ not in labels:
                 handles.append(h_)
                 labels.append(l_)
-    fig.legend(handles, labels, fontsize=LEGEND_SIZE, loc="outside upper center", ncols=2)
+    if own:
+        fig.legend(handles, labels, fontsize=LEGEND_SIZE, loc="outside upper center", ncols=2)
+    else:
+        axes[0, 0].legend(handles, labels, fontsize=LEGEND_SIZE)
     return fig
 
 

@@ -18,6 +18,7 @@ from bayeshopf.plotting._style import (
     LEGEND_SIZE,
     axis_label,
     new_figure,
+    panels,
     style_axes,
 )
 
@@ -27,7 +28,7 @@ _HELD_COLOURS = ("C2", "C4", "C1", "C5", "C6", "C8", "C9")
 
 
 def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str = "airspeed",
-                        mu_units: str = "m/s") -> Figure:
+                        mu_units: str = "m/s", ax=None) -> Figure:
     """``x = (A_s A_u)²/(A_s² + A_u²)²`` of each pair, with the lines the normal form allows.
 
     Draws the measured ``x`` with 90% intervals (per-segment spreads), the
@@ -48,6 +49,7 @@ def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str =
             :class:`~bayeshopf.posterior.HybridPosterior`.
         mu_label: Name of μ (axis label).
         mu_units: Unit of μ.
+        ax: Axes to draw into; a new figure when ``None``.
 
     Returns:
         The figure.
@@ -57,8 +59,11 @@ def plot_pair_invariant(pairs: list[PairInvariant], *, fit=None, mu_label: str =
     lo_mu = min(mu.min(), line.mu_fold) - 0.1 * np.ptp(mu)
     hi_mu = max(mu.max(), line.mu0) + 0.1 * np.ptp(mu)
     grid = np.linspace(lo_mu, hi_mu, 200)
-    fig = new_figure(5.2, 3.6)
-    ax = fig.add_subplot()
+    def make():
+        f = new_figure(5.2, 3.6)
+        return f, [f.add_subplot()]
+
+    fig, (ax,) = panels(ax, 1, make)
     style_axes(ax)
     band = np.quantile(line.x_draws(grid), _Q, axis=0)
     ax.fill_between(grid, band[0], band[2], color="0.8", lw=0, label="all pairs: line, 90% band",

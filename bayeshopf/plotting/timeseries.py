@@ -10,83 +10,126 @@ from matplotlib.figure import Figure
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
     BRANCH_MARKERS,
+    LABEL_SIZE,
     LEGEND_SIZE,
     MEASURED_GREY,
     TITLE_SIZE,
+    axis_label,
+    ci_label,
+    marker_face,
     new_figure,
+    panels,
     style_axes,
+    z_value,
 )
+from bayeshopf.plotting._units import convert
+from bayeshopf.plotting.phase import channel_label, check_offsets
 
 
 def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
-                     max_columns: int = 2) -> Figure:
-    """Measured vs predicted time series with 90% bands, one panel per recording.
+                     max_columns: int = 2, offsets: str = "remove",
+                     length_unit: str | None = None, angle_unit: str | None = None,
+                     ci: float = 0.9, ax=None) -> Figure:
+    """Measured vs predicted time series with credible bands, one panel per recording.
 
     Args:
         bands: :class:`~bayeshopf.diagnostics.bands.TimeSeriesBand` records
-            (from :meth:`SpeedFit.time_series_bands`).
+            (from :meth:`~bayeshopf.posterior.HybridPosterior.time_series_bands`).
         mu_label: Name of μ for the panel titles.
         mu_units: Unit of μ.
         max_columns: Panels per row.
+        offsets: ``"remove"`` (default: the measured series' mean over the
+            window is subtracted from it and from the prediction, and the axis
+            reads ``Δz1``) or ``"keep"``.
+        length_unit: Draw a length channel in this unit (``"mm"``, …).
+        angle_unit: Draw an angle channel in this unit (``"deg"``, …).
+        ci: Level of the bands (for the legend; the bands carry it).
+        ax: Axes to draw into, one per band (a sequence or array; extra ones
+            hidden); a new figure when ``None``.
 
     Returns:
-        A new figure.
+        The figure.
     """
+    check_offsets(offsets)
     n = len(bands)
     if n == 0:
         raise ValueError("bands must hold at least one TimeSeriesBand; got none")
     cols = min(max_columns, n)
     rows = math.ceil(n / cols)
-    fig = new_figure(4.0 * cols, 2.2 * rows)
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
-    for ax, b in zip(axes, bands, strict=False):
+
+    def make():
+        f = new_figure(4.0 * cols, 2.2 * rows)
+        axes = np.atleast_1d(f.subplots(rows, cols, squeeze=False)).ravel()
+        for a in axes[n:]:
+            a.set_visible(False)
+        return f, axes[:n]
+
+    fig, axes = panels(ax, n, make)
+    removed = offsets == "remove"
+    for ax_i, b in zip(axes, bands, strict=False):
         c = BRANCH_COLOURS[b.branch]
-        ax.plot(b.t, b.measured, color=MEASURED_GREY, lw=1.0, label="measured")
-        ax.fill_between(b.t, b.lo, b.hi, color=c, alpha=0.3, lw=0, label="90% band")
-        ax.plot(b.t, b.median, color=c, lw=1.0, ls="--", label="posterior median")
-        unit = f" [{b.units}]" if b.units else ""
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel(f"{b.channel}{unit}")
-        ax.set_title(f"{b.branch}, {mu_label} = {b.mu:g} {mu_units}".strip(), fontsize=TITLE_SIZE)
-        style_axes(ax)
-    for ax in axes[n:]:
-        ax.set_visible(False)
+        factor, unit = convert(b.units, length_unit, angle_unit)
+        shift = float(np.mean(b.measured)) if removed else 0.0
+        ax_i.plot(b.t, (np.asarray(b.measured) - shift) * factor, color=MEASURED_GREY, lw=1.0,
+                  label="measured", gid="measured")
+        ax_i.fill_between(b.t, (np.asarray(b.lo) - shift) * factor,
+                          (np.asarray(b.hi) - shift) * factor, color=c, alpha=0.3, lw=0,
+                          label=f"{ci_label(ci)} band", gid="band")
+        ax_i.plot(b.t, (np.asarray(b.median) - shift) * factor, color=c, lw=1.0, ls="--",
+                  label="posterior median", gid="median")
+        ax_i.set_xlabel("t [s]", fontsize=LABEL_SIZE)
+        ax_i.set_ylabel(channel_label(b.channel, unit, removed), fontsize=LABEL_SIZE)
+        ax_i.set_title(f"{b.branch}, {mu_label} = {b.mu:g} {mu_units}".strip(),
+                       fontsize=TITLE_SIZE)
+        style_axes(ax_i)
     axes[0].legend(fontsize=LEGEND_SIZE, loc="upper right")
     return fig
 
 
 def plot_frequency(bands, measured=None, *, predictive=None, mu_label: str = "mu",
-                   mu_units: str = "") -> Figure:
-    """Oscillation frequency against μ: posterior median and 90% band per branch.
+                   mu_units: str = "", ci: float = 0.9, ax=None) -> Figure:
+    """Oscillation frequency against μ: posterior median and credible band per branch.
 
     Args:
         bands: :class:`~bayeshopf.diagnostics.bands.FrequencyBand` records (the curve).
-        measured: Optional ``(mu, frequency_hz, branch)`` triples of the recordings.
+        measured: Optional ``(mu, frequency_hz, branch)`` triples of the recordings,
+            or ``(mu, frequency_hz, branch, se_hz)`` with the standard error of
+            each frequency, drawn as its ``ci`` interval.
         predictive: Optional predictive :class:`~bayeshopf.diagnostics.bands.FrequencyBand`
             records (``frequency_band(..., predictive=True)``), drawn as dotted edges:
             where a new recording's frequency is expected.
         mu_label: Name of μ.
         mu_units: Unit of μ.
+        ci: Level of the bands (for the legend) and of the measured intervals.
+        ax: Axes to draw into; a new figure when ``None``.
 
     Returns:
-        A new figure.
+        The figure.
     """
-    fig = new_figure(4.5, 3.0)
-    ax = fig.subplots()
+    def make():
+        f = new_figure(4.5, 3.0)
+        return f, [f.subplots()]
+
+    fig, (ax,) = panels(ax, 1, make)
+    level = ci_label(ci)
     for b in bands:
         c = BRANCH_COLOURS[b.branch]
-        ax.fill_between(b.mu, b.lo, b.hi, color=c, alpha=0.25, lw=0)
-        ax.plot(b.mu, b.median, color=c, lw=1.2, label=f"{b.branch} (median, 90%)")
+        ax.fill_between(b.mu, b.lo, b.hi, color=c, alpha=0.25, lw=0, gid=f"{b.branch}-band")
+        ax.plot(b.mu, b.median, color=c, lw=1.2, label=f"{b.branch} (median, {level})",
+                gid=f"{b.branch}-median")
     for b in predictive or ():
         c = BRANCH_COLOURS[b.branch]
-        ax.plot(b.mu, b.lo, ":", color=c, lw=1.0, label=f"{b.branch}, new recording (90%)")
+        ax.plot(b.mu, b.lo, ":", color=c, lw=1.0, label=f"{b.branch}, new recording ({level})")
         ax.plot(b.mu, b.hi, ":", color=c, lw=1.0)
-    for mu, f, branch in measured or ():
-        ax.plot([mu], [abs(f)], BRANCH_MARKERS[branch], color=BRANCH_COLOURS[branch],
-                mfc="none" if branch == "unstable" else BRANCH_COLOURS[branch], ms=5)
-    unit = f" [{mu_units}]" if mu_units else ""
-    ax.set_xlabel(f"{mu_label}{unit}")
-    ax.set_ylabel("frequency [Hz]")
+    for row in measured or ():
+        mu, f, branch = row[:3]
+        se = row[3] if len(row) > 3 else 0.0
+        colour = BRANCH_COLOURS[branch]
+        ax.errorbar([mu], [abs(f)], yerr=[z_value(ci) * se] if se else None,
+                    fmt=BRANCH_MARKERS[branch], color=colour, mfc=marker_face(branch),
+                    mec=colour, ms=5, capsize=2, elinewidth=0.9, gid=f"{branch}-measured")
+    ax.set_xlabel(axis_label(mu_label, mu_units), fontsize=LABEL_SIZE)
+    ax.set_ylabel("frequency [Hz]", fontsize=LABEL_SIZE)
     ax.legend(fontsize=LEGEND_SIZE)
     style_axes(ax)
     return fig

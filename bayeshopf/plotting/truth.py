@@ -24,6 +24,8 @@ def plot_diagram_vs_truth(
     mu: np.ndarray | None = None,
     zoom: bool = True,
     title: str | None = None,
+    ax=None,
+    **kwargs,
 ) -> Figure:
     """The posterior bifurcation diagram over the true one, with held-out orbits.
 
@@ -38,6 +40,9 @@ def plot_diagram_vs_truth(
         mu: μ grid (default :func:`~bayeshopf.plotting.diagram_grid`).
         zoom: Add the inset about the stable recording of largest μ.
         title: Axes title.
+        ax: Axes to draw into; a new figure when ``None``.
+        **kwargs: More options of :func:`~bayeshopf.plotting.diagram.plot_bifurcation`
+            (``length_unit``, ``p_exists``, ``bars``, …).
 
     Returns:
         The figure.
@@ -49,14 +54,17 @@ def plot_diagram_vs_truth(
         fit.diagram(mu), fit.ppc(), mu_label=fit.mu_label, mu_units=fit.mu_units,
         amplitude_units=fit.amplitude_units,
         amplitude_label=f"peak-to-peak of {fit.spec.frame.names[0]}",
-        truth=truth.amplitude, zoom=default_zoom(fit, mu) if zoom else None,
+        truth=truth.amplitude, zoom=default_zoom(fit, mu) if zoom else None, ax=ax, **kwargs,
     )
-    ax = fig.axes[0]
+    ax = ax if ax is not None else _diagram_axes(fig)
     if held_out:
         x = [r["mu"] for r in held_out]
         y = [r["true"] for r in held_out]
-        ax.plot(x, y, ls="none", marker="x", ms=6, mew=1.3, color="k", zorder=8,
-                gid="held-out")
+        from bayeshopf.plotting._units import convert
+
+        factor = convert(fit.amplitude_units, kwargs.get("length_unit"))[0]
+        ax.plot(x, np.asarray(y, float) * factor, ls="none", marker="x", ms=6, mew=1.3,
+                color="k", zorder=8, gid="held-out")
         n_in = sum(r["inside"] for r in held_out)
         main = ax.get_legend()  # plot_bifurcation's legend below the axes: keep it
         if main is not None:
@@ -68,3 +76,11 @@ def plot_diagram_vs_truth(
     if title:
         ax.set_title(title, fontsize=LEGEND_SIZE + 1.5)
     return fig
+
+
+def _diagram_axes(fig: Figure):
+    """The diagram's axes of a figure made by ``plot_bifurcation`` (not the P(exists) panel)."""
+    for a in fig.axes:
+        if any(line.get_gid() == "stable-median" for line in a.lines):
+            return a
+    return fig.axes[0]

@@ -17,6 +17,7 @@ from bayeshopf.plotting._style import (
     axis_label,
     marker_face,
     new_figure,
+    panels,
     style_axes,
 )
 from bayeshopf.plotting.diagram import _draw_band
@@ -29,7 +30,7 @@ POINT_STYLE = ":"
 
 def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed",
                        mu_units: str = "m/s", amplitude_units: str = "m",
-                       n_cols: int = 4) -> Figure:
+                       n_cols: int = 4, ax=None) -> Figure:
     """One panel per held-out recording, and a last panel with the fold per fold.
 
     Each panel shows the Bayesian fit without that recording (median, 50% and
@@ -47,6 +48,9 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         mu_units: Unit of μ.
         amplitude_units: Unit of the amplitude.
         n_cols: Panels per row.
+        ax: Axes to draw into, one per fold and one for the folds' fold points
+            (a sequence or array; extra ones hidden; the legend then goes on the
+            first); a new figure when ``None``.
 
     Returns:
         The figure.
@@ -63,8 +67,13 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         mu_grid = np.linspace(mu_all.min() - 0.3 * span, mu_all.max() + 0.45 * span, 160)
     n_panels = len(loo.folds) + 1
     n_rows = int(np.ceil(n_panels / n_cols))
-    fig = new_figure(3.1 * n_cols, 2.7 * n_rows)
-    axes = fig.subplots(n_rows, n_cols, squeeze=False).ravel()
+
+    def make():
+        f = new_figure(3.1 * n_cols, 2.7 * n_rows)
+        return f, f.subplots(n_rows, n_cols, squeeze=False).ravel()
+
+    own = ax is None
+    fig, axes = panels(ax, n_panels, make)
     names = list(features.names)
     y_max = 1.25 * float(np.nanmax(features.amplitude))
     for ax, fold in zip(axes, loo.folds, strict=False):
@@ -122,6 +131,9 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         Line2D([], [], ls="none", marker="*", ms=11, mfc="gold", mec="k",
                label="held out (filled: inside 90%)"),
     ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=LEGEND_SIZE - 1,
-               frameon=False)
+    if own:
+        fig.legend(handles=handles, loc="outside lower center", ncol=3,
+                   fontsize=LEGEND_SIZE - 1, frameon=False)
+    else:
+        axes[0].legend(handles=handles, loc="upper left", fontsize=LEGEND_SIZE - 2)
     return fig

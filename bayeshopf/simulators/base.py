@@ -51,6 +51,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.errors import BayesHopfError
 
 __all__ = ["ExtraForce", "Rhs", "SimulationError", "System"]
@@ -208,10 +209,12 @@ class System:
                     f"expected some of {', '.join(base)}"
                 )
             base.update(params)
+        ensure_x64()
         return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in base.items()}
 
     def vector_field(self, x, mu, params: Mapping[str, Any] | None = None):
         """``rhs(x, mu, params)`` with the system's own parameters by default."""
+        ensure_x64()
         p = self.param_tree() if params is None else params
         return self.rhs(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(mu, dtype=jnp.float64), p)
 

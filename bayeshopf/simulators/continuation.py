@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import brentq
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
 from bayeshopf.simulators.equilibria import HopfPoint, find_hopf
 from bayeshopf.simulators.periodic import (
@@ -473,6 +474,7 @@ def continue_from_hopf(system: System, *, hopf: HopfPoint | None = None,
     Raises:
         SimulationError: If no Hopf point is found or the continuation stalls.
     """
+    ensure_x64()
     t0 = time.perf_counter()
     mu_range = system.mu_range if mu_range is None else (float(mu_range[0]), float(mu_range[1]))
     hopf = find_hopf(system, mu_range) if hopf is None else hopf
@@ -485,6 +487,7 @@ def continue_from_hopf(system: System, *, hopf: HopfPoint | None = None,
 @functools.lru_cache(maxsize=16)
 def bifurcation_diagram(system: System) -> BifurcationDiagram:
     """:func:`continue_from_hopf` with default settings, cached per system object."""
+    ensure_x64()
     return continue_from_hopf(system)
 
 
@@ -543,5 +546,6 @@ def orbit_at(diagram: BifurcationDiagram | Branch, mu: float, branch: str = "sta
         SimulationError: If the branch has no orbit at ``mu``, or Newton's method
             does not converge to it.
     """
+    ensure_x64()
     b = diagram if isinstance(diagram, Branch) else diagram.branch(branch)
     return _orbit_on(b, mu, n_points)

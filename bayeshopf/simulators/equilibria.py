@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import brentq
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
 
 __all__ = ["HopfPoint", "eigenvalues", "equilibrium", "find_hopf", "jacobian"]
@@ -43,6 +44,7 @@ def _mu(mu) -> jax.Array:
 
 def jacobian(system: System, x, mu) -> np.ndarray:
     r"""The Jacobian :math:`J = \partial f/\partial x` at ``(x, mu)``, shape ``(n, n)``."""
+    ensure_x64()
     _, jac = _fns(system)
     return np.asarray(jac(jnp.asarray(x, dtype=jnp.float64), _mu(mu), _params(system)))
 
@@ -61,6 +63,7 @@ def equilibrium(system: System, mu, x0=None, *, tol: float = 1e-12, max_iter: in
     Raises:
         SimulationError: If Newton's method does not converge.
     """
+    ensure_x64()
     f, jac = _fns(system)
     p = _params(system)
     x = np.zeros(system.n_states) if x0 is None else np.array(x0, dtype=np.float64)
@@ -83,6 +86,7 @@ def equilibrium(system: System, mu, x0=None, *, tol: float = 1e-12, max_iter: in
 
 def eigenvalues(system: System, mu, x=None) -> np.ndarray:
     """Eigenvalues of the Jacobian at the equilibrium (or at ``x``), by real part descending."""
+    ensure_x64()
     x = equilibrium(system, mu) if x is None else x
     ev = np.linalg.eigvals(jacobian(system, x, mu))
     return ev[np.argsort(-ev.real)]
@@ -154,6 +158,7 @@ def find_hopf(system: System, mu_range: tuple[float, float] | None = None, *,
     Raises:
         SimulationError: If no such crossing is found.
     """
+    ensure_x64()
     lo, hi = system.mu_range if mu_range is None else (float(mu_range[0]), float(mu_range[1]))
     grid = np.linspace(lo, hi, n_grid)
     x = None

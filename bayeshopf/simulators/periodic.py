@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
 
 __all__ = ["PeriodicOrbit", "floquet_stable", "periodic_orbit", "sample_orbit"]
@@ -76,6 +77,7 @@ class _Kernels(NamedTuple):
 @functools.lru_cache(maxsize=32)
 def kernels(system: System, rtol: float = RTOL, atol: float = ATOL) -> _Kernels:
     """Compiled shooting and sampling functions of one system (cached per system)."""
+    ensure_x64()
     rhs = system.rhs
     jac_x = jax.jacfwd(rhs, argnums=0)
     jac_mu = jax.jacfwd(rhs, argnums=1)
@@ -122,6 +124,7 @@ def kernels(system: System, rtol: float = RTOL, atol: float = ATOL) -> _Kernels:
 
 def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) -> Shot:
     r"""Integrate one period: :math:`\varphi_T(x_0)` with its derivatives (module docstring)."""
+    ensure_x64()
     k = kernels(system, rtol, atol)
     n = system.n_states
     out = np.asarray(k.shoot(jnp.asarray(x0, dtype=jnp.float64),
@@ -135,6 +138,7 @@ def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) 
 def sample_orbit(system: System, x0, T, mu, n_points: int = N_POINTS, *,
                  rtol: float = RTOL, atol: float = ATOL) -> np.ndarray:
     """States at ``t_k = k T / n_points``, ``k = 0..n_points−1``, shape ``(n_points, n)``."""
+    ensure_x64()
     k = kernels(system, rtol, atol)
     return np.asarray(k.sample(jnp.asarray(x0, dtype=jnp.float64),
                                jnp.asarray(T, dtype=jnp.float64),
@@ -223,6 +227,7 @@ class PeriodicOrbit:
 def make_orbit(system: System, mu: float, period: float, x0: np.ndarray,
                monodromy: np.ndarray, states: np.ndarray) -> PeriodicOrbit:
     """Assemble a :class:`PeriodicOrbit` (amplitudes and means of the observed states)."""
+    ensure_x64()
     fl = _sorted_multipliers(monodromy)
     obs = states[:, list(system.observed_index)]
     ptp, mean = refined_ptp(obs), obs.mean(axis=0)
@@ -257,6 +262,7 @@ def periodic_orbit(system: System, mu: float, x0, period: float, *, n_points: in
     Raises:
         SimulationError: If Newton's method does not converge.
     """
+    ensure_x64()
     k = kernels(system, rtol, atol)
     p = param_tree(system)
     m = jnp.asarray(mu, dtype=jnp.float64)

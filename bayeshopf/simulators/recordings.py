@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from bayeshopf._atomic import swap_in
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.io import write_interchange
 from bayeshopf.data.recording import Recording, RecordingSet
 from bayeshopf.errors import OutputError
@@ -184,6 +185,7 @@ def simulate_recordings(
         SimulationError: For an unknown system, mismatched ``mu``/``branch``, a
             μ where the branch has no LCO, or a bad setting.
     """
+    ensure_x64()
     system = get_system(system)
     plan = _plan(system, mu, branch)
     noise = float(noise)

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.summaries import interval
 from bayeshopf.simulators.base import SimulationError
@@ -141,6 +142,7 @@ def amplitude_truth(diagram: BifurcationDiagram, channel: str | None = None) -> 
     Raises:
         SimulationError: For an unobserved channel.
     """
+    ensure_x64()
     system = diagram.system
     channel = channel or system.planar[0]
     if channel not in system.observed:
@@ -336,6 +338,7 @@ def flutter_experiment(
         and its :class:`SimulatedTruth` (Hopf 18.2747 m/s, fold 14.9362 m/s,
         a2 = 3.654).
     """
+    ensure_x64()
     duration, rate = (8.0, 250.0) if fast else (20.0, 500.0)
     return _experiment("flutter3dof", plan, held_out, seed=seed, noise=noise, offsets=offsets,
                        offset_sd=FLUTTER_OFFSET_SD, duration_s=duration, sample_rate_hz=rate)
@@ -378,6 +381,7 @@ def vanderpol_experiment(
     Returns:
         ``(recordings, truth)``.
     """
+    ensure_x64()
     duration, rate = (60.0, 10.0) if fast else (150.0, 20.0)
     return _experiment("vanderpol", plan, held_out, seed=seed, noise=noise, offsets=offsets,
                        offset_sd=VANDERPOL_OFFSET_SD, duration_s=duration, sample_rate_hz=rate)
@@ -402,6 +406,7 @@ def held_out_check(fit, truth: SimulatedTruth, points=None, *, mass: float = 0.9
         One record per point: ``mu``, ``branch``, ``true``, ``median``, ``lo``,
         ``hi``, ``inside`` and ``p_exists`` (share of draws with an orbit there).
     """
+    ensure_x64()
     rows = []
     for mu, branch in (truth.held_out if points is None else points):
         draws = np.asarray(fit.amplitude([mu], branch, predictive=True))[:, 0]
@@ -428,6 +433,7 @@ def held_out_recordings(truth: SimulatedTruth, points=None) -> RecordingSet:
         truth: The experiment's :class:`SimulatedTruth`.
         points: ``((mu, branch), ...)``; default ``truth.held_out``.
     """
+    ensure_x64()
     pts = truth.held_out if points is None else tuple(points)
     return simulate_recordings(
         truth.system, [m for m, _ in pts], [b for _, b in pts], noise=truth.noise,

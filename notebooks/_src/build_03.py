@@ -24,8 +24,9 @@ This notebook fits the Bayesian hybrid model on the collapsed core (`bayeshopf.p
 4. a third channel, the actuator command, regressed on the normal-form state,
 5. the frequency of the oscillations and the time series, with bands.
 
-The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf). Set `BAYESHOPF_FLUTTER_CBC`
-to their folder, or call `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
+The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf), read from the folder
+named by `BAYESHOPF_FLUTTER_CBC` (or `../shared/data/flutter_cbc`) if it exists, else downloaded once
+(11 MB, SHA-256 checked) by `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
 before starting the kernel for a quick run (short chains, two leave-one-out folds)."""),
     new_code_cell("""%matplotlib inline
 import os
@@ -55,7 +56,7 @@ from bayeshopf.plotting.validation import plot_leave_one_out
 from bayeshopf.posterior import fit_hybrid
 from bayeshopf.validation import leave_one_out
 
-DATA = os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc"))
+DATA = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc")))
 settings = CollapsedSettings.fast() if FAST else CollapsedSettings()   # the defaults for the full run
 print(f"bayeshopf {bh.__version__}; fast mode: {FAST}")"""),
     new_markdown_cell("""## 1. The recordings
@@ -66,7 +67,7 @@ airspeed comes from `Wind_sped`, the branch from the file name. The unstable rec
 orbit is aligned in phase and expanded in K = 4 harmonics per channel in a common planar frame, and
 the mean and standard error over the segments enter the likelihood. The whole record is used, not
 the paper's 1.2 s."""),
-    new_code_cell("""rs = flutter_cbc(DATA)
+    new_code_cell("""rs = flutter_cbc(DATA) if DATA.is_dir() else flutter_cbc(download=True)  # no local copy: downloaded once
 feats = extract_harmonics(rs, n_harmonics=settings.n_harmonics, segment_periods=settings.segment_periods)
 rows = ["| recording | μ (m/s) | branch | segments | heave p-p (mm) | frequency (Hz) |",
         "|---|---:|---|---:|---:|---:|"]

@@ -108,19 +108,20 @@ if not FAST:  # the fast mode skips it (tests/test_discrepancy.py covers it)
 
 The 7 CBC recordings of the real rig against the `flutter3dof` simulator. There is **no ground truth**:
 what the analysis finds is a hypothesis to test on the rig, not a discovery. The hybrid fit of the rig
-runs at the default `CollapsedSettings`, as `bayeshopf fit` does. Skipped in fast mode or when the
-data are not available."""),
+runs at the default `CollapsedSettings`, as `bayeshopf fit` does. Skipped in fast mode; without a local
+copy of the recordings they are downloaded once."""),
     new_code_cell("""DATA = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc")))
-if not FAST and DATA.is_dir():
+if not FAST:
     from bayeshopf.datasets import flutter_cbc
 
-    real = analyse(flutter_cbc(str(DATA)), flutter, seed=0, hybrid=True)
+    rig = flutter_cbc(DATA) if DATA.is_dir() else flutter_cbc(download=True)  # no local copy: downloaded once
+    real = analyse(rig, flutter, seed=0, hybrid=True)
     print(real.to_json()["verdict"]["sentence"])
     show_hybrid(real.to_json())
     display(Markdown(real.to_markdown()))
     display(plot_discrepancy_diagram(real))
 else:
-    print("skipped (fast mode or no data)")"""),
+    print("skipped (fast mode)")"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={
