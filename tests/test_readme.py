@@ -2,9 +2,10 @@
 
 * ```` ```python ```` blocks run in order in one namespace, in a temporary folder;
 * in ```` ```bash ````/```` ```console ```` blocks every line that starts with
-  ``bayeshopf`` runs through :func:`bayeshopf.cli.main.main` (``--fast`` added to
-  the commands that fit), in order, in one temporary folder; every other line
-  must be one of the setup commands listed in :data:`EXEMPT`;
+  ``bayeshopf`` runs (``--fast`` added to the commands that fit), in order, in one
+  temporary folder: through :func:`bayeshopf.cli.main.main` but the
+  :data:`SLOW_COMMANDS`, and all of them, each in its own process, with
+  ``-m slow``; every other line must be one of the setup commands in :data:`EXEMPT`;
 * ```` ```toml ```` blocks are rig descriptions: each is read by
   :meth:`RigDescription.from_file`;
 * blocks in any other language, or none, are listings (a manifest, a CSV
@@ -19,8 +20,11 @@ network, and skip when ../shared is absent. The fits of the Python blocks use
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -107,6 +111,12 @@ def test_python_blocks(user_without_shared, tmp_path, monkeypatch) -> None:
 
 
 def _run_commands(tmp_path, monkeypatch, capsys, slow: bool) -> list[str]:
+    """Run the README's commands in order in ``tmp_path``.
+
+    ``slow=False``: in this process through ``main(argv)``, leaving out
+    :data:`SLOW_COMMANDS` and the commands that read their output. ``slow=True``:
+    every command, each in its own process as from a shell.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -122,8 +132,14 @@ def _run_commands(tmp_path, monkeypatch, capsys, slow: bool) -> list[str]:
             continue
         if argv[0] in ("fit", "demo") and "--fast" not in argv:
             argv = argv + ["--fast"]
-        code = main(argv)
-        out, err = capsys.readouterr()
+        if slow:
+            r = subprocess.run([sys.executable, "-m", "bayeshopf.cli.main", *argv],
+                               cwd=tmp_path, capture_output=True, text=True, timeout=1200,
+                               env={**os.environ, "MPLBACKEND": "Agg"})
+            code, out, err = r.returncode, r.stdout, r.stderr
+        else:
+            code = main(argv)
+            out, err = capsys.readouterr()
         assert code == 0, f"bayeshopf {' '.join(argv)}: exit {code}\n{err}"
         assert out.strip(), f"bayeshopf {' '.join(argv)} printed nothing"
         for o in outputs:
