@@ -242,16 +242,24 @@ class HybridPosterior:
             z = r.planar(recordings.planar)
             t = r.t - r.t[0]
             om = float(f.omega[i])
-            window = t <= n_periods * 2 * np.pi / om
-            sel = np.flatnonzero(window)[:: max(1, int(round(2 * np.pi / (om * 60 * r.dt))))]
+            t_end = n_periods * 2 * np.pi / om
+            window = t <= t_end
             w = self.spec.frame.to_frame(z[window])
             ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
             phase0 = -float(np.arctan2(ab[2], ab[1]))
-            pred = self.time_series(r.mu, r.branch, t[sel], phase0)[..., channel]
+            # a uniform grid of about 60 points per period; the measured value is the
+            # sample at each grid time, NaN where a sensor had no reading (left out of
+            # the recording), so that the drawn line breaks there
+            step = max(1, int(round(2 * np.pi / (om * 60 * r.dt)))) * r.dt
+            tg = np.arange(0.0, t_end + 0.5 * step, step)
+            idx = np.clip(np.searchsorted(t, tg), 0, t.size - 1)
+            near = np.where(np.abs(t[idx - 1] - tg) < np.abs(t[idx] - tg), idx - 1, idx)
+            meas = np.where(np.abs(t[near] - tg) <= 0.5 * r.dt, z[near, channel], np.nan)
+            pred = self.time_series(r.mu, r.branch, tg, phase0)[..., channel]
             q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
             name = recordings.planar[channel]
-            out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], t[sel],
-                                      z[sel, channel], q[0], q[1], q[2]))
+            out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], tg,
+                                      meas, q[0], q[1], q[2]))
         return out
 
     def frequency_check(self) -> list[dict]:

@@ -169,6 +169,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="100:110", help="A:B, noise seeds A..B-1")
     ap.add_argument("--steps", type=int, default=4)
     ap.add_argument("--out", default=str(OUT / "design"), help="output stem (.json, .md)")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the campaigns already in the output's .json and run only the "
+                         "seeds it lacks")
     args = ap.parse_args(argv)
     from bayeshopf.inference.cache import single_thread_eigen
 
@@ -176,8 +179,15 @@ def main(argv=None) -> int:
     a, b = (int(x) for x in args.seeds.split(":"))
     results = []
     stem = Path(args.out)
+    if args.resume and stem.with_suffix(".json").exists():
+        results = [r for r in json.loads(stem.with_suffix(".json").read_text())["results"]
+                   if a <= r["seed"] < b]
+    done = {r["seed"] for r in results}
     for seed in range(a, b):
+        if seed in done:
+            continue
         results.append(campaign(seed, args.steps))
+        results.sort(key=lambda r: r["seed"])
         table, md = _summary(results, args.steps)
         atomic_write(stem.with_suffix(".json"), json.dumps(
             {"settings": {"start": START, "noise": NOISE, "duration_s": DURATION_S,
@@ -187,7 +197,8 @@ def main(argv=None) -> int:
              "summary": table, "results": results}, indent=1))
         atomic_write(stem.with_suffix(".md"), "# Simulated CBC campaigns (bench_design.py)\n\n"
                      + __doc__.split("\n\n")[1] + "\n\n"
-                     + f"Seeds {a}–{a + len(results) - 1} ({len(results)} campaigns).\n\n"
+                     + f"Seeds {', '.join(str(r['seed']) for r in results)} "
+                     f"({len(results)} campaigns).\n\n"
                      + md + "\n")
     print(_summary(results, args.steps)[1])
     return 0

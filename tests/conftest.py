@@ -2,12 +2,32 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
-from bayeshopf._x64 import ensure_x64
-from bayeshopf.inference.cache import single_thread_eigen
+
+def _pin_xdist_worker() -> None:
+    """Pin each pytest-xdist worker (``-n auto``) to a core of its own, before any JAX work.
+
+    Two JAX processes sharing cores slow each other far beyond their share (a fit
+    of 22 s alone took 736 s beside another test process, README Limits); one
+    core each runs both at full speed. The subprocesses a test starts (CLI,
+    notebook kernels) inherit the worker's core.
+    """
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    if not worker.startswith("gw") or not hasattr(os, "sched_setaffinity"):
+        return
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) > 1:
+        os.sched_setaffinity(0, {cpus[int(worker[2:]) % len(cpus)]})
+
+
+_pin_xdist_worker()
+
+from bayeshopf._x64 import ensure_x64  # noqa: E402  (after the pinning: it imports JAX)
+from bayeshopf.inference.cache import single_thread_eigen  # noqa: E402
 
 single_thread_eigen()   # before any JAX work (bayeshopf.inference.cache)
 ensure_x64()   # tests of the low-level blocks (bayeshopf.model) compute in float64 too;

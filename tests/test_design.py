@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,61 @@ def test_cli_next(demo, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--candidates" in err[0] and "MU_MIN <= MU_MAX" in err[0]
     assert main(["next", str(tmp_path / "nothing")]) == 2
+
+
+@pytest.mark.slow  # one simulated campaign: 9 NUTS refits (about 5 minutes on one core)
+def test_a_designed_campaign_beats_the_sweep_and_stays_calibrated():
+    """benchmarks/bench_design.py's campaign on a seed outside the benchmark's (110).
+
+    After 4 added recordings the design's 90% fold interval is narrower than the
+    uniform sweep's and still holds the true fold; the Hopf interval holds the
+    true Hopf point. (Over seeds 100–109 the benchmark reports the same per seed;
+    this is the check that the code path still does it.)
+    """
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from bench_design import campaign
+
+    res = campaign(110, steps=4, strategies=("design", "sweep"))
+    design, sweep = res["strategies"]["design"][-1], res["strategies"]["sweep"][-1]
+    assert design["mu_fold"]["inside"] and design["mu0"]["inside"], design
+    assert design["mu_fold"]["width"] < sweep["mu_fold"]["width"], (design, sweep)
+
+
+NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "05_experimental_design.ipynb"
+
+
+@pytest.mark.slow  # about 85 s: two fits at fast settings
+@pytest.mark.notebooks
+def test_campaign_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    copy = tmp_path / NOTEBOOK.name   # never execute (or overwrite) the stored notebook
+    copy.write_bytes(NOTEBOOK.read_bytes())
+    nb = nbformat.read(copy, as_version=4)
+    monkeypatch.setenv("BAYESHOPF_FAST", "1")
+    monkeypatch.delenv("MPLBACKEND", raising=False)
+    nbclient.NotebookClient(nb, timeout=1200, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}}).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: True" in text and "5 recordings: fold" in text
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 2
+
+
+@pytest.mark.notebooks
+def test_stored_campaign_notebook_has_outputs_of_a_full_run():
+    """The stored notebook ran at default settings: 4 steps, a figure each, no error."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
+    outputs = [o for c in code for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
+    assert "fast mode: False" in text
+    assert sum(f"step {k}: where to measure next" in text for k in range(1, 5)) == 4
+    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 5

@@ -390,3 +390,20 @@ def test_second_rig_fits_end_to_end_from_the_cli(rig2, tmp_path, capsys):
     fit = load_fit(out)
     assert fit.p_exists(21.0, "unstable") > 0.95                # the unstable branch is there
     assert (out / "figures" / "phase_portraits.png").stat().st_size > 10_000
+    # time series: a uniform grid; the measured series is NaN exactly where the
+    # dropouts were left out (the drawn line breaks), the prediction is everywhere
+    rs2 = load_recordings(rig2.folder)
+    bands = fit.posterior.time_series_bands(rs2)   # the saved fit, rebuilt
+    assert sum(np.isnan(b.measured).any() for b in bands) >= 3
+    for band, rec in zip(bands, rs2, strict=True):
+        assert np.allclose(np.diff(band.t), band.t[1] - band.t[0])
+        assert np.isfinite(band.median).all()
+        gap = np.isnan(band.measured)
+        if not rec.has_gaps:
+            assert not gap.any()
+            continue
+        t = rec.t - rec.t[0]
+        nearest = np.min(np.abs(t[None, :] - band.t[gap, None]), axis=1) if gap.any() else []
+        assert np.all(np.asarray(nearest) > 0.5 * rec.dt)        # no sample there
+        kept = np.min(np.abs(t[None, :] - band.t[~gap, None]), axis=1)
+        assert np.all(kept <= 0.5 * rec.dt + 1e-12)                # a sample there

@@ -135,16 +135,18 @@ NOTEBOOK = REPO / "notebooks" / "03_wind_tunnel.ipynb"
 # default settings), leave_one_out (test_validation, one fold of the demo set), fit_channel
 # (test_channels, slow)
 @pytest.mark.notebooks
-def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, recordings):
+def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, user_without_shared):
+    """As a user without ../shared runs it: the recordings come from the (local) mirror."""
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     pytest.importorskip("ipykernel")
     copy = tmp_path / NOTEBOOK.name  # never execute (or overwrite) the stored notebook
     copy.write_bytes(NOTEBOOK.read_bytes())
     nb = nbformat.read(copy, as_version=4)
-    monkeypatch.setenv("BAYESHOPF_FAST", "1")
-    monkeypatch.setenv("BAYESHOPF_FLUTTER_CBC", str(CBC_DIR))
+    monkeypatch.setenv("BAYESHOPF_FAST", "1")   # the kernel inherits the mirror's environment
     monkeypatch.delenv("MPLBACKEND", raising=False)
+    served = user_without_shared[1]
+    n0 = len(served)
     nbclient.NotebookClient(nb, timeout=1800, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}}).execute()
     outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
@@ -153,6 +155,7 @@ def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, recor
     assert "fast mode: True" in text and "segment spreads apart" in text
     assert "training amplitudes inside their 90% predictive bands" in text
     assert sum("image/png" in o.get("data", {}) for o in outputs) >= 7
+    assert len(served) - n0 == 7, served[n0:]   # the seven files came from the download
 
 
 @pytest.mark.notebooks

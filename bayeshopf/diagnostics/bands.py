@@ -23,7 +23,8 @@ class TimeSeriesBand:
         channel: Channel name.
         units: Channel unit.
         t: Times from the first sample (s), shape ``(n_t,)``.
-        measured: Measured channel, shape ``(n_t,)``.
+        measured: Measured channel, shape ``(n_t,)``; NaN where the recording has no
+            sample (a sensor dropout left out).
         median: Posterior median of the predicted channel.
         lo: 5% quantile.
         hi: 95% quantile.

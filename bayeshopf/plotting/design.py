@@ -64,8 +64,12 @@ def plot_design(result, fit=None, *, axes: tuple[Axes, Axes] | None = None,
             a = np.asarray(c.amplitude) * factor
             ax_d.errorbar([c.mu], [a[0]], yerr=[[a[0] - a[1]], [a[2] - a[0]]], fmt="*",
                           ms=12, color=COLOURS[c.branch], mec="k", zorder=6)
-            ax_d.annotate(str(rank), (c.mu, a[2]), textcoords="offset points", xytext=(0, 4),
-                          ha="center", fontsize=9)
+            # beside the star, stable to the right and unstable to the left, so that both
+            # branches' labels stay readable where the branches meet near the fold
+            right = c.branch == "stable"
+            ax_d.annotate(str(rank), (c.mu, a[0]), textcoords="offset points",
+                          xytext=(9 if right else -9, 0), ha="left" if right else "right",
+                          va="center", fontsize=9, fontweight="bold")
         ax_d.set_xlabel("")
         ax_d.tick_params(labelbottom=False)
         ax_d.set_title(f"next measurement for the {TARGET_TEXT[result.target]} "

@@ -69,7 +69,7 @@ def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
     for ax_i, b in zip(axes, bands, strict=False):
         c = BRANCH_COLOURS[b.branch]
         factor, unit = convert(b.units, length_unit, angle_unit)
-        shift = float(np.mean(b.measured)) if removed else 0.0
+        shift = float(np.nanmean(b.measured)) if removed else 0.0
         ax_i.plot(b.t, (np.asarray(b.measured) - shift) * factor, color=MEASURED_GREY, lw=1.0,
                   label="measured", gid="measured")
         ax_i.fill_between(b.t, (np.asarray(b.lo) - shift) * factor,
