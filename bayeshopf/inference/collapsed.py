@@ -251,7 +251,8 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
     # slow on CPU (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential);
     # not parallel either: one CPU device per chain (pmap) took 31 s on the rig's
-    # 2 cores against 13 s sequential
+    # 2 cores against 13 s sequential; nor two Python threads of 2 chains each on a
+    # pre-traced potential (13.5 s against 11.0 s for one thread of 4 chains)
     mcmc.run(key, **kwargs)
     chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
     divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
