@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from notebook_runs import execute_fast, stored
 
 from bayeshopf.cli.main import main
 from bayeshopf.design import _expected_var_ratio, next_measurements, parse_candidates
@@ -138,33 +139,18 @@ NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "05_experimental_design.ipy
 @pytest.mark.slow  # about 85 s: two fits at fast settings
 @pytest.mark.notebooks
 def test_campaign_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
-    pytest.importorskip("ipykernel")
-    copy = tmp_path / NOTEBOOK.name   # never execute (or overwrite) the stored notebook
-    copy.write_bytes(NOTEBOOK.read_bytes())
-    nb = nbformat.read(copy, as_version=4)
-    monkeypatch.setenv("BAYESHOPF_FAST", "1")
-    monkeypatch.delenv("MPLBACKEND", raising=False)
-    nbclient.NotebookClient(nb, timeout=1200, kernel_name="python3",
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
-    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o.output_type == "error"]
-    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
-    assert "fast mode: True" in text and "5 recordings: fold" in text
-    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 2
+    run = execute_fast(NOTEBOOK, tmp_path, monkeypatch, timeout=1200)
+    assert not run.errors
+    assert "fast mode: True" in run.text and "5 recordings: fold" in run.text
+    assert run.n_images >= 2
 
 
 @pytest.mark.notebooks
 def test_stored_campaign_notebook_has_outputs_of_a_full_run():
     """The stored notebook ran at default settings: 4 steps, a figure each, no error."""
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    code = [c for c in nb.cells if c.cell_type == "code"]
-    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
-    outputs = [o for c in code for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o.output_type == "error"]
-    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
-    assert "fast mode: False" in text
-    assert sum(f"step {k}: where to measure next" in text for k in range(1, 5)) == 4
-    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 5
+    run = stored(NOTEBOOK)
+    assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
+    assert not run.errors
+    assert "fast mode: False" in run.text
+    assert sum(f"step {k}: where to measure next" in run.text for k in range(1, 5)) == 4
+    assert run.n_images >= 5

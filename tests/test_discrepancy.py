@@ -15,6 +15,7 @@ import json
 import jax
 import numpy as np
 import pytest
+from notebook_runs import execute_fast
 
 jax.config.update("jax_enable_x64", True)
 
@@ -319,21 +320,9 @@ def test_example_script_runs_in_fast_mode(tmp_path):
 # pitch, no effect, delayed_aero) in a fresh kernel
 @pytest.mark.notebooks
 def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
-    import shutil
-
-    nbclient = pytest.importorskip("nbclient")
-    import nbformat
-
-    src = REPO / "notebooks" / "04_missing_physics.ipynb"
-    copy = tmp_path / src.name                       # never execute the stored notebook
-    shutil.copyfile(src, copy)
-    for k, v in _fast_env().items():
-        monkeypatch.setenv(k, v)
-    nb = nbformat.read(copy, as_version=4)
-    nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
-                            resources={"metadata": {"path": str(REPO / "notebooks")}}).execute()
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
-                   for o in c.get("outputs", []))
+    run = execute_fast(REPO / "notebooks" / "04_missing_physics.ipynb", tmp_path, monkeypatch,
+                       timeout=900, workdir=REPO / "notebooks")
+    text = run.text
     assert "The simulator lacks quadratic damping in pitch" in text
     assert "no effect: The simulator matches the recordings within their noise" in text
 

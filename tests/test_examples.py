@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 import os
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from notebook_runs import execute_fast, stored
 
 from bayeshopf.plotting import FIGURE_NAMES
 
@@ -67,42 +67,17 @@ def test_quickstart_script_runs_and_writes_figures(tmp_path):
 
 @pytest.mark.notebooks
 def test_quickstart_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
-    pytest.importorskip("ipykernel")
-
-    copy = tmp_path / NOTEBOOK.name  # never execute (or overwrite) the stored notebook
-    shutil.copyfile(NOTEBOOK, copy)
-    nb = nbformat.read(copy, as_version=4)
-    monkeypatch.setenv("BAYESHOPF_FAST", "1")  # inherited by the kernel
-    monkeypatch.delenv("MPLBACKEND", raising=False)  # the notebook selects inline itself
-    client = nbclient.NotebookClient(
-        nb, timeout=TIMEOUT_S, kernel_name="python3",
-        resources={"metadata": {"path": str(tmp_path)}},
-    )
-    client.execute()  # raises CellExecutionError on the first failing cell
-
-    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
-              if o.output_type == "error"]
-    assert not errors, errors
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
-                   for o in c.get("outputs", []) if o.output_type == "stream")
-    assert "fast mode: True" in text
-    n_images = sum("image/png" in o.get("data", {}) for c in nb.cells if c.cell_type == "code"
-                   for o in c.get("outputs", []))
-    assert n_images >= 5
-    nbformat.write(nb, copy)  # the executed copy, for inspection after a failure
+    run = execute_fast(NOTEBOOK, tmp_path, monkeypatch, timeout=TIMEOUT_S)
+    assert not run.errors, run.errors
+    assert "fast mode: True" in run.text
+    assert run.n_images >= 5
 
 
 @pytest.mark.notebooks
 def test_stored_notebook_has_outputs_of_a_full_run():
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    code = [c for c in nb.cells if c.cell_type == "code"]
-    assert 'FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"' in code[0].source
-    outputs = [o for c in code for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o.output_type == "error"]
-    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
-    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 5
-    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
-    assert "fast mode: False" in text, "stored outputs must come from a default-settings run"
+    run = stored(NOTEBOOK)
+    assert 'FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"' in run.code[0].source
+    assert not run.errors
+    assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
+    assert run.n_images >= 5
+    assert "fast mode: False" in run.text, "stored outputs must come from a default-settings run"

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from notebook_runs import execute_fast, stored
 
 from bayeshopf.validation import leave_one_out
 
@@ -137,37 +138,22 @@ NOTEBOOK = REPO / "notebooks" / "03_wind_tunnel.ipynb"
 @pytest.mark.notebooks
 def test_wind_tunnel_notebook_executes_in_fast_mode(tmp_path, monkeypatch, user_without_shared):
     """As a user without ../shared runs it: the recordings come from the (local) mirror."""
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
-    pytest.importorskip("ipykernel")
-    copy = tmp_path / NOTEBOOK.name  # never execute (or overwrite) the stored notebook
-    copy.write_bytes(NOTEBOOK.read_bytes())
-    nb = nbformat.read(copy, as_version=4)
-    monkeypatch.setenv("BAYESHOPF_FAST", "1")   # the kernel inherits the mirror's environment
-    monkeypatch.delenv("MPLBACKEND", raising=False)
-    served = user_without_shared[1]
+    served = user_without_shared[1]   # the kernel inherits the mirror's environment
     n0 = len(served)
-    nbclient.NotebookClient(nb, timeout=1800, kernel_name="python3",
-                            resources={"metadata": {"path": str(tmp_path)}}).execute()
-    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o.output_type == "error"]
-    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
-    assert "fast mode: True" in text and "segment spreads apart" in text
-    assert "training amplitudes inside their 90% predictive bands" in text
-    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 7
+    run = execute_fast(NOTEBOOK, tmp_path, monkeypatch)
+    assert not run.errors
+    assert "fast mode: True" in run.text and "segment spreads apart" in run.text
+    assert "training amplitudes inside their 90% predictive bands" in run.text
+    assert run.n_images >= 7
     assert len(served) - n0 == 7, served[n0:]   # the seven files came from the download
 
 
 @pytest.mark.notebooks
 def test_stored_wind_tunnel_notebook_has_outputs_of_a_full_run():
-    nbformat = pytest.importorskip("nbformat")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    code = [c for c in nb.cells if c.cell_type == "code"]
-    assert all(c.get("execution_count") for c in code), "stored notebook not fully executed"
-    outputs = [o for c in code for o in c.get("outputs", [])]
-    assert not [o for o in outputs if o.output_type == "error"]
-    text = "".join(o.get("text", "") for o in outputs if o.output_type == "stream")
-    assert "fast mode: False" in text
-    assert "from bayeshopf.posterior import fit_hybrid" in code[0].source
-    assert 'fit_hybrid(rs, "subcritical"' in "".join(c.source for c in code)
-    assert sum("image/png" in o.get("data", {}) for o in outputs) >= 7
+    run = stored(NOTEBOOK)
+    assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
+    assert not run.errors
+    assert "fast mode: False" in run.text
+    assert "from bayeshopf.posterior import fit_hybrid" in run.code[0].source
+    assert 'fit_hybrid(rs, "subcritical"' in "".join(c.source for c in run.code)
+    assert run.n_images >= 7
