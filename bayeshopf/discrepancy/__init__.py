@@ -9,10 +9,17 @@ probable one and shows the fit before and after, with a one-sentence verdict.
 ``bayeshopf discrepancy DATA --simulator NAME --out DIR`` runs it from the
 shell; ``bayeshopf simulate ... --effect NAME --effect-value X`` plants a hidden
 effect in simulated recordings to test it blind.
+
+:func:`calibrate` first calibrates the parameters a simulator declares
+uncertain (``System.uncertain``) as nuisance parameters, then fits each term
+jointly with them, and tells "the parameters are off" from "a term is missing"
+(:mod:`bayeshopf.discrepancy.calibration`; not yet behind the command).
 """
 
 from bayeshopf.discrepancy.analysis import DiscrepancyReport as DiscrepancyReport
 from bayeshopf.discrepancy.analysis import analyse as analyse
+from bayeshopf.discrepancy.calibration import CalibrationReport as CalibrationReport
+from bayeshopf.discrepancy.calibration import calibrate as calibrate
 from bayeshopf.discrepancy.effects import effect_names as effect_names
 from bayeshopf.discrepancy.effects import simulate_with_effect as simulate_with_effect
 from bayeshopf.discrepancy.effects import with_effect as with_effect

@@ -31,6 +31,7 @@ from bayeshopf.simulators.base import ExtraForce as ExtraForce
 from bayeshopf.simulators.base import Rhs as Rhs
 from bayeshopf.simulators.base import SimulationError as SimulationError
 from bayeshopf.simulators.base import System as System
+from bayeshopf.simulators.base import UncertainParameter as UncertainParameter
 from bayeshopf.simulators.continuation import BifurcationDiagram as BifurcationDiagram
 from bayeshopf.simulators.continuation import Branch as Branch
 from bayeshopf.simulators.continuation import Fold as Fold

@@ -38,6 +38,28 @@ shape ``(n_states, n_coordinates)`` through which an additive generalised force
 :math:`B` puts :math:`M^{-1}F` in the velocity rows. :meth:`System.with_extra_force`
 returns a new system with a term such as a cubic stiffness or a friction force
 added, which is how missing-physics terms are planted in a simulated truth.
+
+**Uncertain parameters.** A system may declare which of its ``params`` a test
+engineer does not know exactly (``uncertain``, a tuple of
+:class:`UncertainParameter`), each with a prior centred on the nominal value
+in ``params`` and a width relative to it. :mod:`bayeshopf.discrepancy`
+calibrates them against recordings as nuisance parameters before it names a
+missing term. Each prior is a map from a standard normal coordinate
+:math:`z \sim \mathcal N(0, 1)` to the physical value :math:`\theta`
+(:meth:`UncertainParameter.value`):
+
+.. math::
+
+    \text{lognormal:}\quad \theta = \theta_0\, e^{\sigma z},
+        \quad \sigma = \sqrt{\log(1 + s^2)};
+    \qquad
+    \text{normal:}\quad \theta = \theta_0\,(1 + s z),
+
+with the nominal value :math:`\theta_0` and the relative standard deviation
+:math:`s` (``scale``): the log-normal prior has median :math:`\theta_0` and
+coefficient of variation exactly :math:`s`, and keeps the sign of
+:math:`\theta_0`; the normal prior has mean :math:`\theta_0` and standard
+deviation :math:`s|\theta_0|`.
 """
 
 from __future__ import annotations
@@ -54,7 +76,7 @@ import numpy as np
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.errors import BayesHopfError
 
-__all__ = ["ExtraForce", "Rhs", "SimulationError", "System"]
+__all__ = ["PRIORS", "ExtraForce", "Rhs", "SimulationError", "System", "UncertainParameter"]
 
 #: ``rhs(x, mu, params) -> dx``: states of shape ``(n,)``, scalar μ, parameter dict.
 Rhs = Callable[[Any, Any, Mapping[str, Any]], Any]
@@ -77,6 +99,90 @@ def _tuple_of_str(name: str, value) -> tuple[str, ...]:
     if not all(isinstance(v, str) for v in out):
         raise SimulationError(f"{name} must hold strings; got {out!r}")
     return out
+
+
+#: The prior families of an :class:`UncertainParameter`.
+PRIORS: tuple[str, ...] = ("lognormal", "normal")
+
+
+@dataclass(frozen=True)
+class UncertainParameter:
+    r"""One parameter of a :class:`System` that is known only to within a prior.
+
+    The prior is centred on the system's nominal value :math:`\theta_0` (its
+    entry in ``System.params``) and written through a standard normal
+    coordinate :math:`z` (module docstring): :math:`\theta = \theta_0 e^{\sigma z}`,
+    :math:`\sigma = \sqrt{\log(1+s^2)}` (``"lognormal"``) or
+    :math:`\theta = \theta_0(1 + s z)` (``"normal"``).
+
+    Attributes:
+        name: The parameter's name in ``System.params``.
+        prior: ``"lognormal"`` (positive quantities: stiffness, damping, a
+            coefficient that must keep its sign) or ``"normal"``.
+        scale: Relative standard deviation :math:`s` (0.1 for ±10%).
+        description: Why this width (one sentence, for reports).
+
+    Raises:
+        SimulationError: If ``prior`` is not one of :data:`PRIORS`, or
+            ``scale`` is not a finite number > 0.
+    """
+
+    name: str
+    prior: str = "lognormal"
+    scale: float = 0.1
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SimulationError(f"UncertainParameter.name must be a parameter name; "
+                                  f"got {self.name!r}")
+        if self.prior not in PRIORS:
+            raise SimulationError(f"UncertainParameter {self.name}: prior must be one of "
+                                  f"{', '.join(PRIORS)}; got {self.prior!r}")
+        scale = float(self.scale)
+        if not (np.isfinite(scale) and scale > 0):
+            raise SimulationError(f"UncertainParameter {self.name}: scale (relative standard "
+                                  f"deviation) must be a finite number > 0; got {self.scale!r}")
+        object.__setattr__(self, "scale", scale)
+
+    @property
+    def sigma(self) -> float:
+        r"""Prior sd of :math:`\log\theta` (lognormal), :math:`\theta/\theta_0` (normal)."""
+        return float(np.sqrt(np.log1p(self.scale**2))) if self.prior == "lognormal" \
+            else self.scale
+
+    def value(self, z, nominal: float):
+        """The physical value at standard normal coordinate ``z`` (a float or numpy array)."""
+        if self.prior == "lognormal":
+            return nominal * np.exp(self.sigma * z)
+        return nominal * (1.0 + self.scale * z)
+
+    def coordinate(self, value, nominal: float):
+        """The standard normal coordinate ``z`` of a physical value (inverse of :meth:`value`)."""
+        if self.prior == "lognormal":
+            return np.log(np.asarray(value, dtype=float) / nominal) / self.sigma
+        return (np.asarray(value, dtype=float) / nominal - 1.0) / self.scale
+
+    def check(self, system_name: str, params: Mapping[str, float]) -> None:
+        """Check the declaration against a system's parameters.
+
+        Raises:
+            SimulationError: If the parameter is not among ``params``, or its
+                nominal value cannot carry the prior (≤ 0 for a log-normal,
+                0 or not finite for a relative width).
+        """
+        if self.name not in params:
+            raise SimulationError(f"{system_name}: uncertain parameter {self.name!r} must be one "
+                                  f"of params ({', '.join(params)}); it is not")
+        v = float(params[self.name])
+        if self.prior == "lognormal" and not (np.isfinite(v) and v > 0):
+            raise SimulationError(f"{system_name}: uncertain parameter {self.name} has a "
+                                  f"log-normal prior, so a nominal value > 0 is expected; "
+                                  f"got {v!r} (use prior='normal' for a signed parameter)")
+        if not (np.isfinite(v) and v != 0):
+            raise SimulationError(f"{system_name}: uncertain parameter {self.name} has a width "
+                                  f"relative to its nominal value, so a finite nonzero nominal "
+                                  f"value is expected; got {v!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,6 +219,9 @@ class System:
         force_input: ``force_input(x, mu, params) -> B`` of shape
             ``(n, len(coordinates))``; ``None`` if extra forces are not supported.
         description: One paragraph on the model and its source.
+        uncertain: The parameters known only to within a prior
+            (:class:`UncertainParameter`, distinct names among ``params``);
+            empty when every parameter is taken as exact.
     """
 
     name: str
@@ -131,6 +240,7 @@ class System:
     coordinates: tuple[str, ...] = ()
     force_input: Callable[[Any, Any, Mapping[str, Any]], Any] | None = None
     description: str = ""
+    uncertain: tuple[UncertainParameter, ...] = ()
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -173,6 +283,22 @@ class System:
         set_(self, "coordinates", _tuple_of_str("coordinates", self.coordinates))
         set_(self, "default_plan", plan)
         set_(self, "parameter_label", self.parameter_label or self.parameter)
+        if isinstance(self.uncertain, UncertainParameter):
+            raise SimulationError(f"{self.name}: uncertain must be a tuple of "
+                                  "UncertainParameter; got a single one (wrap it in a tuple)")
+        unc = tuple(self.uncertain)
+        bad = [u for u in unc if not isinstance(u, UncertainParameter)]
+        if bad:
+            raise SimulationError(f"{self.name}: uncertain must hold UncertainParameter "
+                                  f"records; got {bad[0]!r}")
+        names_u = [u.name for u in unc]
+        dup = sorted({n for n in names_u if names_u.count(n) > 1})
+        if dup:
+            raise SimulationError(f"{self.name}: uncertain parameters must be distinct; "
+                                  f"{', '.join(dup)} declared more than once")
+        for u in unc:
+            u.check(self.name, params)
+        set_(self, "uncertain", unc)
 
     # ------------------------------------------------------------------ helpers
 

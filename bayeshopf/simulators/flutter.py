@@ -59,15 +59,45 @@ The parameter values are those of the authors' code: :math:`c_\alpha` and
 :math:`k_{\alpha3} = 5006` (Table t1 says 5006.7; the difference moves the fold
 by less than 0.001 m/s). Heave ``h`` (m) and pitch ``alpha`` (rad) are observed;
 :math:`w` never is.
+
+**Uncertain parameters** (:data:`FLUTTER_UNCERTAIN`, priors centred on the
+values above; :class:`~bayeshopf.simulators.base.UncertainParameter`). The
+aerodynamic coefficients are those of Jones' approximation of Wagner's
+indicial lift function, :math:`\phi(s) = c_0 - c_1 e^{-c_2 s} - c_3 e^{-c_4 s}`
+in reduced time :math:`s = Ut/b` (1, 0.165, 0.0455, 0.335, 0.3 for a thin
+aerofoil in inviscid flow): :math:`c_0` scales the steady circulatory lift
+(lift-curve slope :math:`2\pi c_0`), :math:`c_1, c_3` are the amplitudes and
+:math:`c_2, c_4` the rates of the two lags. The widths (relative standard
+deviations) are what a test engineer would accept for a rig of this kind:
+
+==================  =========  ======  ===================================================
+parameter           prior      width   why
+==================  =========  ======  ===================================================
+k_h, k_alpha        lognormal  10%     linear springs, from static load tests and the
+                                       measured natural frequencies
+c_h, c_alpha        lognormal  30%     structural damping from free decays: varies with
+                                       amplitude and mounting
+c0                  lognormal  10%     a real section's lift-curve slope at the rig's
+                                       Reynolds number (~10⁵) is 0.85–1.0 × 2π
+c1, c2, c3, c4      lognormal  30%     the lags are fitted to thin-aerofoil theory; a real
+                                       section's indicial response differs by tens of %
+k_alpha2            normal     30%     the asymmetric (even) part of the measured moment–
+                                       angle curve, the least certain term of its fit
+k_alpha3            lognormal  20%     the hardening of the pitch spring, from the same fit;
+                                       log-normal keeps it hardening
+==================  =========  ======  ===================================================
+
+The geometry and inertia (b, a, ρ, masses, :math:`I_\alpha`, :math:`x_\alpha`) are
+measured directly and are taken as exact.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 
-from bayeshopf.simulators.base import System
+from bayeshopf.simulators.base import System, UncertainParameter
 
-__all__ = ["FLUTTER3DOF", "FLUTTER_PARAMS", "flutter_matrices", "flutter_rhs"]
+__all__ = ["FLUTTER3DOF", "FLUTTER_PARAMS", "FLUTTER_UNCERTAIN", "flutter_matrices", "flutter_rhs"]
 
 #: Table t1 with the authors' code's precision.
 FLUTTER_PARAMS: dict[str, float] = {
@@ -96,6 +126,29 @@ FLUTTER_UNITS: dict[str, str] = {
     "k_alpha3": "N m/rad^3", "k_h": "N/m", "x_alpha": "", "c0": "", "c1": "", "c2": "",
     "c3": "", "c4": "",
 }
+
+_WHY_K = "linear spring: static load tests and the measured natural frequencies (±10%)"
+_WHY_D = "structural damping from free decays, amplitude- and mounting-dependent (±30%)"
+_WHY_LAG = "Jones' lag fitted to thin-aerofoil theory; real sections differ (±30%)"
+#: The parameters of :data:`FLUTTER_PARAMS` known only to within a prior (module docstring).
+FLUTTER_UNCERTAIN: tuple[UncertainParameter, ...] = (
+    UncertainParameter("k_h", "lognormal", 0.10, _WHY_K),
+    UncertainParameter("k_alpha", "lognormal", 0.10, _WHY_K),
+    UncertainParameter("c_h", "lognormal", 0.30, _WHY_D),
+    UncertainParameter("c_alpha", "lognormal", 0.30, _WHY_D),
+    UncertainParameter("c0", "lognormal", 0.10,
+                       "steady lift-curve slope 2π·c0; real sections at Re ~ 1e5: 0.85–1.0 "
+                       "(±10%)"),
+    UncertainParameter("c1", "lognormal", 0.30, _WHY_LAG),
+    UncertainParameter("c2", "lognormal", 0.30, _WHY_LAG),
+    UncertainParameter("c3", "lognormal", 0.30, _WHY_LAG),
+    UncertainParameter("c4", "lognormal", 0.30, _WHY_LAG),
+    UncertainParameter("k_alpha2", "normal", 0.30,
+                       "even part of the fitted moment-angle curve, its least certain term "
+                       "(±30%)"),
+    UncertainParameter("k_alpha3", "lognormal", 0.20,
+                       "hardening of the pitch spring from the same fit; stays hardening (±20%)"),
+)
 
 
 def flutter_matrices(U, p):
@@ -197,4 +250,5 @@ FLUTTER3DOF = System(
     description="3-DOF aeroelastic aerofoil (heave, pitch, aerodynamic lag state) of Lee, "
     "Barton & Renson, Section 4.2, eq. flutter2 with Table t1; subcritical Hopf at "
     "U = 18.27 m/s, fold of LCOs at 14.94 m/s.",
+    uncertain=FLUTTER_UNCERTAIN,
 )
