@@ -118,6 +118,32 @@ def _base_warm_starts(system: System, rs: RecordingSet):
     return diagram, np.stack(x0), np.array(T), note
 
 
+def prepare(recordings: RecordingSet, system: System, K: int = DEFAULT_K, kinds=KINDS
+            ) -> tuple[Fitter, Any, list[str]]:
+    """What every analysis starts from: features, library system and the nominal orbits.
+
+    The observed channels are measured with the planar reference first; the
+    library is sized by their median amplitudes and frequency; the library
+    system's orbits at the recordings, every coefficient 0, are shot from the
+    nominal diagram's warm starts.
+
+    Returns:
+        ``(fitter, diagram, notes)``: the :class:`~bayeshopf.discrepancy.select.Fitter`,
+        the nominal bifurcation diagram, and the warm starts' notes.
+    """
+    obs = system.observed
+    ref = recordings.planar[0] if recordings.planar[0] in obs else obs[0]
+    channels = (ref,) + tuple(c for c in obs if c != ref)
+    mf = measure(recordings, channels, K=K)
+    amp = dict(zip(channels, np.median(mf.amplitude, axis=0), strict=True))
+    lib = library(system, amp, float(np.median(mf.y[:, 0])), kinds=kinds)
+    L = library_system(system, lib)
+    diagram, x0, T, notes = _base_warm_starts(system, recordings)
+    stable = np.array([b == "stable" for b in mf.branch])
+    base = solve_orbits(L, {**L.params, **library_params(lib)}, x0, T, mf.mu, stable)
+    return Fitter(L, lib, mf, base), diagram, [n for n in notes if n]
+
+
 def _points(system: System) -> dict:
     """Hopf point and folds of ``system`` (``None`` with a note where not found)."""
     from bayeshopf.simulators.continuation import continue_from_hopf
@@ -205,18 +231,9 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
 
     t0 = time.perf_counter()
     system = get_system(system)
-    obs = system.observed
-    ref = recordings.planar[0] if recordings.planar[0] in obs else obs[0]
-    channels = (ref,) + tuple(c for c in obs if c != ref)
-    mf = measure(recordings, channels, K=K)
-    amp = dict(zip(channels, np.median(mf.amplitude, axis=0), strict=True))
-    freq = float(np.median(mf.y[:, 0]))
-    lib = library(system, amp, freq, kinds=kinds)
-    L = library_system(system, lib)
-    diagram, x0, T, notes = _base_warm_starts(system, recordings)
-    stable = np.array([b == "stable" for b in mf.branch])
-    base = solve_orbits(L, {**L.params, **library_params(lib)}, x0, T, mf.mu, stable)
-    fitter = Fitter(L, lib, mf, base)
+    fitter, diagram, notes = prepare(recordings, system, K, kinds)
+    mf, lib, L, base = fitter.mf, fitter.lib, fitter.system, fitter.base
+    channels = mf.layout.channels
     lz0, e0 = null_log_z(fitter)
     fits = []
     for term in tqdm(lib.terms, desc="terms", disable=not progress, leave=False):

@@ -127,10 +127,11 @@ from scipy import integrate, optimize, stats
 
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.discrepancy.features import DEFAULT_K, measure
-from bayeshopf.discrepancy.orbits import OrbitBatch, solve_orbits, track
+from bayeshopf.discrepancy.analysis import prepare
+from bayeshopf.discrepancy.features import DEFAULT_K
+from bayeshopf.discrepancy.orbits import OrbitBatch, track
 from bayeshopf.discrepancy.select import Fitter, _cdf
-from bayeshopf.discrepancy.terms import KINDS, Term, library, library_params, library_system
+from bayeshopf.discrepancy.terms import KINDS, Term
 from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System, UncertainParameter
 from bayeshopf.simulators.registry import get_system
@@ -695,23 +696,6 @@ def fit_term(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term, cal:
 # ---------------------------------------------------------------------- front door
 
 
-def _prepare(recordings: RecordingSet, system: System, K: int, kinds):
-    """Features, library, library system and the nominal orbits (as :func:`analyse` does)."""
-    from bayeshopf.discrepancy.analysis import _base_warm_starts
-
-    obs = system.observed
-    ref = recordings.planar[0] if recordings.planar[0] in obs else obs[0]
-    channels = (ref,) + tuple(c for c in obs if c != ref)
-    mf = measure(recordings, channels, K=K)
-    amp = dict(zip(channels, np.median(mf.amplitude, axis=0), strict=True))
-    lib = library(system, amp, float(np.median(mf.y[:, 0])), kinds=kinds)
-    L = library_system(system, lib)
-    _, x0, T, notes = _base_warm_starts(system, recordings)
-    stable = np.array([b == "stable" for b in mf.branch])
-    base = solve_orbits(L, {**L.params, **library_params(lib)}, x0, T, mf.mu, stable)
-    return Fitter(L, lib, mf, base), lib, [n for n in notes if n]
-
-
 def _pct(p: ParameterPosterior) -> str:
     lo, hi = (100 * (v / p.nominal - 1) for v in p.ci90)
     return f"{p.name} {100 * p.shift:+.1f}% (90% {lo:+.1f}% to {hi:+.1f}%)"
@@ -761,7 +745,8 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     if not unc:
         raise CalibrationError(f"{system.name}: uncertain parameters expected (System."
                                "uncertain, a tuple of UncertainParameter); it declares none")
-    fitter, lib, notes = _prepare(recordings, system, K, kinds)
+    fitter, _, notes = prepare(recordings, system, K, kinds)
+    lib = fitter.lib
     secs = {"prepare": time.perf_counter() - t0}
     e0 = fitter.residuals(fitter.base)
     chi0 = float(np.sum(e0**2))

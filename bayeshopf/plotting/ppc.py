@@ -141,7 +141,9 @@ def plot_ppc(
     ax_a.set_ylabel(axis_label(f"predicted {amplitude_label}", amplitude_units),
                     fontsize=LABEL_SIZE)
     ax_a.set_title("(a) amplitude", fontsize=TITLE_SIZE, loc="left")
-    ax_a.legend(handles, labels, loc="upper left", fontsize=LEGEND_SIZE, frameon=False)
+    # below the axes: inside, a six-entry key covers amplitudes along y = x in a small panel
+    ax_a.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2,
+                fontsize=LEGEND_SIZE, frameon=False)
     if ax_b is None:
         return fig
 
