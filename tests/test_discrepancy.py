@@ -2,7 +2,9 @@
 
 Each effect's recordings are simulated once per module (4 stable + 4 unstable
 LCOs of flutter3dof, 1.5% RMS noise, sensor offsets, 8 s records) and
-analysed blind: :func:`analyse` is told the simulator and nothing else. The
+analysed blind: :func:`analyse` is told the simulator and nothing else, with
+every parameter nominal (``calibrate=False``; the calibrated analysis is tested in
+``test_discrepancy_cli_calibrated.py`` and ``test_discrepancy_calibration.py``). The
 default run covers three effects (both coordinates, three kinds), a set
 without an effect and one outside the library; the other effects are marked
 slow.
@@ -59,7 +61,8 @@ def _blind(flutter, name, value, seed=5):
             rs = simulate_recordings(flutter, mus, brs, seed=seed, **KW)
         else:
             rs, _ = simulate_with_effect(flutter, name, value, mus, brs, seed=seed, **KW)
-        _CACHE[key] = (rs, analyse(rs, flutter, seed=0, hybrid=False, point_intervals=False))
+        _CACHE[key] = (rs, analyse(rs, flutter, seed=0, hybrid=False, point_intervals=False,
+                                   calibrate=False))
     return _CACHE[key]
 
 
@@ -150,7 +153,7 @@ def test_cli_simulate_effect_then_discrepancy(tmp_path, flutter):
     assert json.loads(truth.read_text())["effect"] == "alpha_cubic_stiffness"
     before = {p.name: p.read_bytes() for p in data.iterdir()}
     assert main(["discrepancy", str(data), "--simulator", "flutter3dof", "--out", str(out),
-                 "--no-hybrid", "--quiet"]) == 0
+                 "--no-hybrid", "--quiet", "--no-calibration"]) == 0
     assert {p.name: p.read_bytes() for p in data.iterdir()} == before   # inputs untouched
     d = json.loads((out / "report.json").read_text())
     assert set(d) >= {"verdict", "candidates", "mismatch", "fit"}
@@ -248,7 +251,7 @@ def test_hybrid_fit_is_the_collapsed_core_at_default_settings(flutter, monkeypat
     monkeypatch.setattr(bp, "fit_hybrid", fake_fit_hybrid)
     rs, _ = _blind(flutter, "h_cubic_damping", 20.0)
     rep = analyse(rs, flutter, seed=3, hybrid=True, kinds=("cubic_damping",),
-                  point_intervals=False)
+                  point_intervals=False, calibrate=False)
     assert calls == [("subcritical", 3, CollapsedSettings())]
     h = json.loads(json.dumps(rep.to_json()))["hybrid"]           # JSON-serialisable
     assert h["hopf"] == {"median": 18.27, "ci90": [18.26, 18.29]}
@@ -279,7 +282,7 @@ def test_hybrid_fit_of_a_blind_run(flutter):
 
     rs, _ = _blind(flutter, "h_cubic_damping", 20.0)
     rep = analyse(rs, flutter, seed=0, hybrid=True, hybrid_settings=CollapsedSettings.fast(),
-                  kinds=("cubic_damping",), point_intervals=False)
+                  kinds=("cubic_damping",), point_intervals=False, calibrate=False)
     h = rep.to_json()["hybrid"]
     assert h["settings"]["num_chains"] == 2
     assert h["convergence"]["method"] == "nuts" and h["convergence"]["r_hat"] > 0.99
@@ -312,7 +315,8 @@ def test_example_script_runs_in_fast_mode(tmp_path):
                            str(tmp_path / "mp")], cwd=tmp_path, env=_fast_env(),
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert "The simulator lacks cubic stiffness in pitch" in proc.stdout
+    assert "the simulator lacks cubic damping in heave" in proc.stdout
+    assert "parameters off: k_h" in proc.stdout
     assert (tmp_path / "mp" / "blind" / "report.json").is_file()
 
 
@@ -323,8 +327,9 @@ def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
     run = execute_fast(REPO / "notebooks" / "04_missing_physics.ipynb", tmp_path, monkeypatch,
                        timeout=900, workdir=REPO / "notebooks")
     text = run.text
-    assert "The simulator lacks quadratic damping in pitch" in text
-    assert "no effect: The simulator matches the recordings within their noise" in text
+    # calibrated by default (flutter3dof declares uncertain parameters)
+    assert "the simulator lacks quadratic damping in pitch" in text
+    assert "no effect: The simulator with its nominal parameters matches the recordings" in text
 
 
 @pytest.mark.slow

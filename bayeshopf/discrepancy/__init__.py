@@ -12,8 +12,11 @@ effect in simulated recordings to test it blind.
 
 :func:`calibrate` first calibrates the parameters a simulator declares
 uncertain (``System.uncertain``) as nuisance parameters, then fits each term
-jointly with them, and tells "the parameters are off" from "a term is missing"
-(:mod:`bayeshopf.discrepancy.calibration`; not yet behind the command).
+(and pairs of terms) jointly with them, with the model error inferred, and
+tells "the parameters are off" from "a term is missing"
+(:mod:`bayeshopf.discrepancy.calibration`). :func:`analyse` and the command
+use it by default for such systems (``calibrate=False``, ``--no-calibration``:
+every parameter nominal, single terms).
 """
 
 from bayeshopf.discrepancy.analysis import DiscrepancyReport as DiscrepancyReport

@@ -31,6 +31,30 @@ r"""The whole analysis: compare, locate, name, model, show the improvement, give
 A misfit is *significant* when its :math:`\chi^2` exceeds the 99.9% quantile of
 the :math:`\chi^2` distribution with as many degrees of freedom as features
 (less the offsets and the fitted coefficient).
+
+**With calibration** (the default for a simulator that declares uncertain
+parameters, ``System.uncertain``): steps 3–6 are those of
+:func:`bayeshopf.discrepancy.calibration.calibrate`, run on the same prepared
+features and nominal orbits. It calibrates the uncertain parameters as
+nuisance parameters, fits the library's terms jointly with them and gives the
+verdict ``"none"``, ``"parameters off"``, ``"term missing"`` or
+``"unexplained"``, copied whole into the report with the calibration itself
+(``"calibration"``), its models (``"models"``: none, parameters calibrated,
+each term and pair of terms with probability, log evidence and coefficient)
+and the parameters of the final model (``"parameters"``). The fit is
+reported in up to three stages, each with the errors per channel, the Hopf
+point and fold of a continuation of the model at its posterior medians, and
+the :math:`\chi^2` of the residuals whitened by the recordings' noise and the
+model-error floor (the same whitening for every stage; the calibration's own
+:math:`\chi^2` in ``"calibration"`` may whiten with an inferred model error)
+with features − offsets − the effective number of fitted parameters as
+degrees of freedom: ``"before"`` (nominal), ``"calibrated"`` (the parameters'
+medians, no term) and, when the verdict is ``"term missing"``, ``"after"``
+(the medians of the parameters fitted with the term, or the pair of terms,
+that the verdict names, and the coefficients' medians, at the orbits of that
+fit). The *final model* is the last of these; the mismatch that remains with
+it is located (``mismatch.after``) beside the nominal one
+(``mismatch.by_recording``). ``calibrate=False`` gives the analysis above.
 """
 
 from __future__ import annotations
@@ -54,7 +78,7 @@ from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.registry import get_system
 
-__all__ = ["DiscrepancyReport", "TIE_FACTOR", "analyse", "hybrid_summary"]
+__all__ = ["DiscrepancyReport", "TIE_FACTOR", "analyse", "hybrid_summary", "stage_rows"]
 
 #: Two terms are reported together when their probabilities are within this factor.
 TIE_FACTOR = 5.0
@@ -70,14 +94,21 @@ class DiscrepancyReport:
     Attributes:
         data: The report as JSON-serialisable dict (``report.json``).
         system: The simulator.
-        fits: Posterior of every term, most probable first.
+        fits: Posterior of every term, most probable first
+            (:class:`~bayeshopf.discrepancy.select.TermFit`, or
+            :class:`~bayeshopf.discrepancy.calibration.CalibratedTermFit` with
+            calibration).
         extras: Arrays for the figures (orbits, diagrams, features).
+        calibration: The
+            :class:`~bayeshopf.discrepancy.calibration.CalibrationReport`
+            (``None`` without calibration).
     """
 
     data: dict
     system: System = field(repr=False)
     fits: tuple[TermFit, ...] = field(repr=False, default=())
     extras: dict = field(repr=False, default_factory=dict)
+    calibration: Any = field(repr=False, default=None)
 
     def to_json(self) -> dict:
         """The ``report.json`` structure."""
@@ -85,12 +116,13 @@ class DiscrepancyReport:
 
     @property
     def verdict(self) -> dict:
-        """``{"kind", "terms", "sentence"}``."""
+        """``{"kind", "terms", "sentence"}`` (with calibration, the calibration's verdict)."""
         return self.data["verdict"]
 
     def to_markdown(self) -> str:
         """``report.md``."""
-        return _markdown(self.data)
+        return _markdown_calibrated(self.data) if "calibration" in self.data \
+            else _markdown(self.data)
 
 
 def _fmt(x: float, sig: int = 3) -> str:
@@ -188,7 +220,7 @@ def _loglik(e: np.ndarray) -> np.ndarray:
 def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             hybrid: bool = True, progress: bool = False, K: int = DEFAULT_K,
             kinds: tuple[str, ...] = KINDS, hybrid_settings=None,
-            point_intervals: bool = True) -> DiscrepancyReport:
+            point_intervals: bool = True, calibrate: bool | None = None) -> DiscrepancyReport:
     """Compare recordings with a simulator, locate and name what it lacks (module docstring).
 
     Args:
@@ -205,19 +237,25 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
         hybrid_settings: :class:`~bayeshopf.inference.collapsed.CollapsedSettings`
             of the hybrid fit; default ``CollapsedSettings()`` (the documented
             defaults, full-length chains).
-        point_intervals: Also continue the simulator with the term at the ends of
-            its coefficient's 90% interval, for 90% intervals of its Hopf point
-            and fold (two more continuations; the points are monotone in one
-            coefficient over so short an interval).
+        point_intervals: Without calibration: also continue the simulator with the
+            term at the ends of its coefficient's 90% interval, for 90% intervals
+            of its Hopf point and fold (two more continuations; the points are
+            monotone in one coefficient over so short an interval). With
+            calibration the points are those of the posterior medians only.
+        calibrate: Calibrate the simulator's uncertain parameters first and compare
+            "nothing wrong", "parameters off" and "a term missing"
+            (:func:`bayeshopf.discrepancy.calibration.calibrate`; module
+            docstring, "With calibration"). ``None``: when the system declares
+            uncertain parameters (``system.uncertain``); ``False``: every
+            parameter nominal, single terms only.
 
     Raises:
-        BayesHopfError: Bad recordings, an unknown simulator, or one without
-            extra-force input.
+        BayesHopfError: Bad recordings, an unknown simulator, one without
+            extra-force input, or ``calibrate=True`` for a system that declares no
+            uncertain parameters.
         TypeError: ``hybrid_settings`` that are not a ``CollapsedSettings``.
     """
     ensure_x64()
-    from tqdm.auto import tqdm
-
     if hybrid:
         from bayeshopf.inference.collapsed import CollapsedSettings
 
@@ -227,11 +265,79 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             raise TypeError("hybrid_settings must be a bayeshopf.inference.collapsed."
                             f"CollapsedSettings; got {type(hybrid_settings).__name__}")
 
-    from bayeshopf.diagnostics import arviz_io
-
     t0 = time.perf_counter()
     system = get_system(system)
-    fitter, diagram, notes = prepare(recordings, system, K, kinds)
+    if calibrate is None:
+        calibrate = bool(system.uncertain)
+    elif calibrate and not system.uncertain:
+        from bayeshopf.discrepancy.calibration import CalibrationError
+
+        raise CalibrationError(f"{system.name}: calibrate=True needs uncertain parameters "
+                               "(System.uncertain); it declares none (use calibrate=False)")
+    prepared = prepare(recordings, system, K, kinds)
+    fitter = prepared[0]
+    cal_report = None
+    if calibrate:
+        data, fits, extras, cal_report = _with_calibration(recordings, system, prepared, K=K,
+                                                           kinds=kinds, progress=progress)
+    else:
+        data, fits, extras = _single_terms(system, prepared, seed=seed, progress=progress,
+                                           point_intervals=point_intervals)
+    hyb = None
+    hybrid_fit = None
+    if hybrid:
+        from bayeshopf.posterior import fit_hybrid
+
+        hybrid_fit = fit_hybrid(recordings, "subcritical", seed=seed, settings=hybrid_settings,
+                                progress=progress)
+        hyb = hybrid_summary(hybrid_fit)
+    lib = fitter.lib
+    settings = {"harmonics": K, "seed": seed, "hybrid": hybrid}
+    if calibrate:
+        settings["calibration"] = True
+    data.update({
+        "hybrid": hyb,
+        "simulator": system.name,
+        "library": {"terms": list(lib.names), "skipped": dict(lib.skipped),
+                    "typical_amplitude": dict(lib.amplitude)},
+        "settings": settings,
+        "notes": [n for n in prepared[2] if n],
+        "runtime_s": time.perf_counter() - t0,
+    })
+    extras["hybrid"] = hybrid_fit
+    return DiscrepancyReport(data=data, system=system, fits=tuple(fits), extras=extras,
+                             calibration=cal_report)
+
+
+def _worst_words(loc: list[dict], system: System) -> str:
+    """" The largest mismatch is in …" for the recording of largest χ² in ``loc`` ("" if none)."""
+    p_unit = f" {system.parameter_units}" if system.parameter_units else ""
+    worst = max((r for r in loc if r["channels"] or r["channel"] is None),
+                key=lambda r: (r["channels"][r["channel"]]["chi2"] if r["channel"] else np.inf),
+                default=None)
+    if worst is None or worst["channel"] is None:
+        return ""
+    return (f" The largest mismatch is in {worst['channel']} at {system.parameter} = "
+            f"{worst['mu']:g}{p_unit} ({worst['branch']} branch), amplitude error "
+            f"{100 * worst['amplitude_error']:.1f}%, phase "
+            f"{worst['phase_range'][0]:.0f}–{worst['phase_range'][1]:.0f}°"
+            + (f", {worst['where']}" if worst["where"] else "") + ".")
+
+
+def _single_terms(system: System, prepared, *, seed: int, progress: bool,
+                  point_intervals: bool) -> tuple[dict, list, dict]:
+    """Every parameter nominal, each library term alone (module docstring, steps 1–6).
+
+    Returns:
+        ``(data, fits, extras)``: the report's ``verdict``, ``candidates``,
+        ``mismatch`` and ``fit``; the term fits, most probable first; the arrays
+        for the figures.
+    """
+    from tqdm.auto import tqdm
+
+    from bayeshopf.diagnostics import arviz_io
+
+    fitter, diagram, _ = prepared
     mf, lib, L, base = fitter.mf, fitter.lib, fitter.system, fitter.base
     channels = mf.layout.channels
     lz0, e0 = null_log_z(fitter)
@@ -271,9 +377,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     best_is_none = p_none >= probs[0]
     # ------------------------------------------------- model: the term added
     after_pts = {"hopf": None, "fold": None, "diagram": None}
-    before_pts = {"hopf": float(diagram.hopf.mu),
-                  "fold": _fold(diagram), "folds": [float(f.mu) for f in diagram.folds],
-                  "diagram": diagram}
+    before_pts = _diagram_points(diagram)
     if not best_is_none:
         after_pts = _points(L.with_params(**library_params(lib), **{t.param: best.median}))
         if point_intervals:
@@ -318,16 +422,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             return f"brings the fold from {fb:.2f} to {fa:.2f}{p_unit} and "
         return ""
 
-    worst = max((r for r in loc0 if r["channels"] or r["channel"] is None),
-                key=lambda r: (r["channels"][r["channel"]]["chi2"] if r["channel"] else np.inf),
-                default=None)
-    where = ""
-    if worst is not None and worst["channel"] is not None:
-        where = (f" The largest mismatch is in {worst['channel']} at {system.parameter} = "
-                 f"{worst['mu']:g}{p_unit} ({worst['branch']} branch), amplitude error "
-                 f"{100 * worst['amplitude_error']:.1f}%, phase "
-                 f"{worst['phase_range'][0]:.0f}–{worst['phase_range'][1]:.0f}°"
-                 + (f", {worst['where']}" if worst["where"] else "") + ".")
+    where = _worst_words(loc0, system)
     if best_is_none and not sig_before:
         kind, terms = "none", []
         sentence = ("The simulator matches the recordings within their noise: no missing "
@@ -350,14 +445,6 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             sentence = (f"The simulator lacks {t.plain}: {coef}. Adding it {fold_words()}cuts "
                         f"the amplitude error from {100 * amp_b:.1f}% to {100 * amp_a:.1f}%.")
 
-    hyb = None
-    hybrid_fit = None
-    if hybrid:
-        from bayeshopf.posterior import fit_hybrid
-
-        hybrid_fit = fit_hybrid(recordings, "subcritical", seed=seed, settings=hybrid_settings,
-                                progress=progress)
-        hyb = hybrid_summary(hybrid_fit)
     cands = [{"name": "none", "probability": p_none, "coefficient": None}]
     for f, p in zip(fits, probs, strict=True):
         cands.append({"name": f.term.name, "probability": float(p),
@@ -373,17 +460,192 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
                      "p_value": p_before, "by_recording": loc0,
                      "after": {"significant": bool(sig_after), "by_recording": loc1}},
         "fit": {"before": fit_before, "after": fit_after},
-        "hybrid": hyb,
-        "simulator": system.name,
-        "library": {"terms": list(lib.names), "skipped": dict(lib.skipped),
-                    "typical_amplitude": dict(lib.amplitude)},
-        "settings": {"harmonics": K, "seed": seed, "hybrid": hybrid},
-        "notes": [n for n in notes if n],
-        "runtime_s": time.perf_counter() - t0,
     }
     extras = {"features": mf, "fitter": fitter, "base": base, "before": before_pts,
-              "after": after_pts, "hybrid": hybrid_fit, "e0": e0, "probabilities": probs}
-    return DiscrepancyReport(data=data, system=system, fits=tuple(fits), extras=extras)
+              "after": after_pts, "e0": e0, "probabilities": probs,
+              "after_orbits": best.orbits, "after_label": f"simulator + {t.name}"}
+    return data, fits, extras
+
+
+def _diagram_points(diagram) -> dict:
+    """Hopf point, lowest fold and folds of a computed diagram (as :func:`_points`)."""
+    return {"hopf": float(diagram.hopf.mu), "fold": _fold(diagram),
+            "folds": [float(f.mu) for f in diagram.folds], "diagram": diagram}
+
+
+def _stage(fitter: Fitter, ob: OrbitBatch, p_eff: float, pts: dict) -> tuple[dict, list[dict]]:
+    r"""One model's fit: errors per channel (:func:`_fit_errors`), χ², Hopf and fold; its mismatch.
+
+    The :math:`\chi^2` is that of ``fitter``'s whitened residuals (the recordings'
+    noise and the model-error floor of :mod:`~bayeshopf.discrepancy.select`),
+    the same for every stage, with features − offsets − ``p_eff`` degrees of
+    freedom.
+
+    Args:
+        fitter: The residuals' definition.
+        ob: The model's orbits at the recordings.
+        p_eff: Its effective number of fitted parameters.
+        pts: Its Hopf point and folds (:func:`_points`).
+
+    Returns:
+        ``(fit, located)``: the report's stage dict and :func:`locate`'s rows.
+    """
+    mf = fitter.mf
+    e = fitter.residuals(ob)
+    loc = locate(mf.layout, mf.y, fitter.features(ob), e, fitter.offsets(ob), mf.names, mf.mu,
+                 mf.branch, ob.ok)
+    chi2 = float(np.sum(e**2))
+    dof = float(mf.y.size - len(mf.layout.channels) - p_eff)
+    out = _fit_errors(fitter, ob, loc)
+    out.update(hopf=pts["hopf"], fold=pts["fold"], folds=pts.get("folds"), chi2=chi2,
+               dof=dof, p_value=float(stats.chi2.sf(chi2, dof)), p_eff=float(p_eff),
+               note=pts.get("note"))
+    return out, loc
+
+
+def _named_model(rep) -> dict | None:
+    """The model with terms that a calibration's verdict names, or ``None``.
+
+    The verdict's ``model`` when it names a pair of terms fitted jointly
+    (``"<term>+<term>"`` among ``rep.pairs``) or one term; otherwise the first
+    of its ``terms``, or the most probable term. ``None`` unless the verdict is
+    ``"term missing"``, or when the model has no orbits.
+
+    Returns:
+        ``{"name", "terms": [(Term, median, ci90)], "parameters", "orbits", "p_eff"}``.
+    """
+    from bayeshopf.discrepancy.calibration import KIND_TERM
+
+    v = rep.verdict
+    if v.get("kind") != KIND_TERM or not rep.terms:
+        return None
+    model = v.get("model")
+    pair = next((f for f in getattr(rep, "pairs", ()) if model and f.name == model), None)
+    if pair is not None:
+        out = {"name": pair.name, "terms": list(zip(pair.terms, pair.medians, pair.ci90,
+                                                    strict=True)),
+               "parameters": pair.parameters, "orbits": pair.orbits, "p_eff": pair.p_eff}
+    else:
+        names = [model] + list(v.get("terms") or [])
+        f = next((f for n in names for f in rep.terms if f.term.name == n), rep.terms[0])
+        out = {"name": f.term.name, "terms": [(f.term, f.median, f.ci90)],
+               "parameters": f.parameters, "orbits": f.orbits, "p_eff": f.p_eff}
+    return out if out["orbits"] is not None else None
+
+
+def _with_calibration(recordings: RecordingSet, system: System, prepared, *, K: int,
+                      kinds: tuple[str, ...], progress: bool) -> tuple[dict, tuple, dict, Any]:
+    """The uncertain parameters calibrated first (module docstring, "With calibration").
+
+    Returns:
+        ``(data, fits, extras, calibration_report)``: the report's ``verdict``,
+        ``parameters``, ``models``, ``mismatch``, ``fit``, ``final_model`` and
+        ``calibration``; the terms fitted with the parameters, most probable
+        first; the arrays for the figures; the
+        :class:`~bayeshopf.discrepancy.calibration.CalibrationReport`.
+    """
+    from bayeshopf.discrepancy.calibration import calibrate as run_calibration
+
+    fitter, diagram, _ = prepared
+    mf, lib, L = fitter.mf, fitter.lib, fitter.system
+    rep = run_calibration(recordings, system, kinds=kinds, K=K, progress=progress,
+                          prepared=prepared)
+    cal = rep.calibration
+    verdict = dict(rep.verdict)
+
+    before_pts = _diagram_points(diagram)
+    fit_before, loc0 = _stage(fitter, fitter.base, 0.0, before_pts)
+    cal_values = cal.values()
+    cal_pts = _points(system.with_params(**cal_values))
+    fit_cal, loc_cal = _stage(fitter, cal.orbits, cal.p_eff, cal_pts)
+    fit_cal["parameters"] = cal_values
+    stages = {"before": fit_before, "calibrated": fit_cal}
+    extras: dict[str, Any] = {
+        "features": mf, "fitter": fitter, "base": fitter.base, "before": before_pts,
+        "before_label": "simulator, nominal", "e0": fitter.residuals(fitter.base),
+        "calibration": rep, "calibrated": cal_pts}
+    named = _named_model(rep)
+    if named is not None:
+        params = {p.name: p.median for p in named["parameters"]}
+        coefs = {t.param: m for t, m, _ in named["terms"]}
+        after_pts = _points(L.with_params(**library_params(lib), **params, **coefs))
+        fit_after, loc_final = _stage(fitter, named["orbits"], named["p_eff"], after_pts)
+        fit_after.update(term=named["name"],
+                         terms=[{"name": t.name, "median": m, "ci90": list(ci), "units": t.units}
+                                for t, m, ci in named["terms"]], parameters=params)
+        if len(named["terms"]) == 1:
+            fit_after.update(coefficient=named["terms"][0][1],
+                             coefficient_ci90=list(named["terms"][0][2]))
+        stages["after"] = fit_after
+        stage, label = "after", f"calibrated + {named['name']}"
+        final_params = named["parameters"]
+        extras.update(after=after_pts, after_orbits=named["orbits"],
+                      after_label=f"simulator calibrated + {named['name']}",
+                      intermediate={"label": "simulator calibrated", "diagram":
+                                    cal_pts.get("diagram"), "orbits": cal.orbits})
+    else:
+        stage, label, final_params, loc_final = "calibrated", "calibrated", cal.parameters, loc_cal
+        extras.update(after=cal_pts, after_orbits=cal.orbits, after_label="simulator calibrated")
+    final = stages[stage]
+
+    # ------------------------------------------------ what remains, where
+    chi0, dof0 = fit_before["chi2"], int(round(fit_before["dof"]))
+    # the calibration's inferred model error decides whether a mismatch remains
+    me = rep.verdict["model_error"]["final"]
+    sig_final = bool(rep.verdict["remaining"]["significant"])
+    n_sig = sum(bool(r["significant"]) for r in loc_final)
+    err = (f"model error {100 * me['median']:.2g}% of the orbit amplitude (90% "
+           f"{100 * me['ci90'][0]:.2g}–{100 * me['ci90'][1]:.2g}%)")
+    if sig_final:
+        remaining = (f"A smaller mismatch remains with the {label} simulator: {err}; "
+                     f"significant at the recordings' noise in {n_sig} of {len(loc_final)} "
+                     "recordings." + _worst_words(loc_final, system))
+    else:
+        remaining = (f"With the {label} simulator what remains is within the recordings' "
+                     f"noise ({err}).")
+
+    models = [
+        {"name": "none", "label": "none (nominal parameters)",
+         "probability": float(rep.probabilities["none"]),
+         "log_evidence": float(rep.log_z["none"]), "chi2": float(rep.chi2_nominal),
+         "coefficient": None},
+        {"name": "parameters", "label": "parameters calibrated",
+         "probability": float(rep.probabilities["parameters"]),
+         "log_evidence": float(rep.log_z["parameters"]), "chi2": float(cal.chi2),
+         "coefficient": None, "parameters_off": list(cal.off)}]
+    for f in rep.terms:
+        models.append({
+            "name": f.term.name, "label": f.term.name,
+            "probability": float(rep.probabilities[f.term.name]), "log_evidence": f.log_z,
+            "chi2": f.chi2, "coefficient": {"median": f.median, "ci90": list(f.ci90),
+                                            "units": f.term.units,
+                                            "prior_scale": f.term.scale},
+            "refined": f.refined, "separability": f.separability,
+            "parameters_off": [p.name for p in f.parameters if p.off],
+            "recordings_without_orbit": [mf.names[i] for i in f.lost]})
+    for f in getattr(rep, "pairs", ()):                          # two terms fitted jointly
+        models.append({
+            "name": f.name, "label": f.name, "probability": float(rep.probabilities[f.name]),
+            "log_evidence": f.log_z, "chi2": f.chi2, "coefficient": None,
+            "coefficients": [{"name": t.name, "median": m, "ci90": list(ci), "units": t.units}
+                             for t, m, ci in zip(f.terms, f.medians, f.ci90, strict=True)],
+            "refined": f.refined, "parameters_off": [p.name for p in f.parameters if p.off]})
+    models[2:] = sorted(models[2:], key=lambda m: -m["probability"])
+    data = {
+        "verdict": verdict,
+        "parameters": {"model": label, "table": [p.to_json() for p in final_params]},
+        "models": models,
+        "mismatch": {"significant": bool(fit_before["p_value"] < ALPHA), "chi2": chi0,
+                     "dof": dof0, "p_value": fit_before["p_value"], "by_recording": loc0,
+                     "after": {"model": label, "stage": stage, "significant": bool(sig_final),
+                               "chi2": final["chi2"], "dof": final["dof"],
+                               "p_value": final["p_value"], "sentence": remaining,
+                               "by_recording": loc_final}},
+        "fit": stages,
+        "final_model": {"stage": stage, "label": label},
+        "calibration": rep.to_json(),
+    }
+    return data, rep.terms, extras, rep
 
 
 def _interval(iv) -> dict | None:
@@ -503,11 +765,19 @@ def _markdown(d: dict) -> str:
                      f"{fa['elpd_difference_se']:.1f} |")
     if d.get("hybrid"):
         lines += _hybrid_markdown(d["hybrid"])
-    lines += ["", "## Where the simulator disagrees (before)", "",
-              "| recording | μ | branch | worst channel | amplitude error | frequency error | "
-              "phase range (°) | where | phase to reference: simulated − measured (°) | "
-              "significant |", "|---|---:|---|---|---:|---:|---|---|---|---|"]
-    for r in d["mismatch"]["by_recording"]:
+    lines += ["", "## Where the simulator disagrees (before)", ""]
+    lines += _mismatch_table(d["mismatch"]["by_recording"])
+    if d["notes"]:
+        lines += ["", "## Notes", ""] + [f"* {n}" for n in d["notes"]]
+    return "\n".join(lines) + "\n"
+
+
+def _mismatch_table(rows: list[dict]) -> list[str]:
+    """Markdown table of :func:`locate`'s rows."""
+    lines = ["| recording | μ | branch | worst channel | amplitude error | frequency error | "
+             "phase range (°) | where | phase to reference: simulated − measured (°) | "
+             "significant |", "|---|---:|---|---|---:|---:|---|---|---|---|"]
+    for r in rows:
         if r["channel"] is None:
             lines.append(f"| {r['file']} | {r['mu']:g} | {r['branch']} | – | – | – | – | "
                          f"{r['where']} | – | yes |")
@@ -519,6 +789,100 @@ def _markdown(d: dict) -> str:
                                  for c, v in r["channels"].items()
                                  if v.get("phase_to_reference_deg")) + " | "
                      f"{'yes' if r['significant'] else 'no'} |")
+    return lines
+
+
+#: Column titles of the fit stages with calibration.
+STAGE_TITLES = {"before": "nominal", "calibrated": "calibrated", "after": "calibrated + term"}
+
+
+def _pct_or_dash(x, digits: int = 2) -> str:
+    return "–" if x is None else f"{100 * x:.{digits}f}%"
+
+
+def _num_or_dash(x) -> str:
+    return "–" if x is None else f"{x:.4g}"
+
+
+def stage_rows(d: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
+    """The fit stages of a calibrated report as a table: titles and ``(quantity, cells)`` rows.
+
+    Args:
+        d: ``report.json`` of an analysis with calibration.
+
+    Returns:
+        The stage titles (``nominal``, ``calibrated``, ``calibrated + <term>``
+        where a term was added) and, per quantity, one formatted cell per stage:
+        amplitude and RMS orbit error per channel, frequency error, Hopf point,
+        fold, χ² / degrees of freedom and recordings without an orbit.
+    """
+    fit = d["fit"]
+    keys = [k for k in STAGE_TITLES if k in fit]
+    titles = [STAGE_TITLES[k] if k != "after" else f"calibrated + {fit['after']['term']}"
+              for k in keys]
+    st = [fit[k] for k in keys]
+    rows = []
+    for c in st[0]["amplitude_error"]:
+        rows.append((f"amplitude error {c}", [_pct_or_dash(s["amplitude_error"][c]) for s in st]))
+    for c in st[0]["rms_orbit_error"]:
+        rows.append((f"RMS orbit error {c}", [_pct_or_dash(s["rms_orbit_error"][c]) for s in st]))
+    rows += [("frequency error", [_pct_or_dash(s["frequency_error"], 3) for s in st]),
+             ("Hopf point", [_num_or_dash(s["hopf"]) for s in st]),
+             ("fold", [_num_or_dash(s["fold"]) for s in st]),
+             ("chi² / dof", [f"{s['chi2']:.4g} / {s['dof']:.4g}" for s in st]),
+             ("recordings without orbit",
+              [str(len(s["recordings_without_orbit"])) for s in st])]
+    return titles, rows
+
+
+def _markdown_calibrated(d: dict) -> str:
+    """``report.md`` of an analysis with calibration."""
+    v = d["verdict"]
+    prob = f", probability {v['probability']:.2f}" if v.get("probability") is not None else ""
+    lines = [f"# Discrepancy analysis: {d['simulator']}", "",
+             f"**Verdict ({v['kind']}{prob}).** {v['sentence']}", "",
+             f"## Uncertain parameters ({d['parameters']['model']})", "",
+             "| parameter | units | nominal | median | 90% interval | shift | off |",
+             "|---|---|---:|---:|---|---:|---|"]
+    for p in d["parameters"]["table"]:
+        lines.append(f"| {p['name']} | {p['units']} | {p['nominal']:.5g} | {p['median']:.5g} | "
+                     f"{p['ci90'][0]:.5g} – {p['ci90'][1]:.5g} | {100 * p['shift']:+.2f}% | "
+                     f"{'**yes**' if p['off'] else 'no'} |")
+    lines += ["", "## Models (most probable terms)", "",
+              "| model | probability | log evidence | coefficient median | 90% interval | "
+              "units |",
+              "|---|---:|---:|---:|---|---|"]
+    for m in d["models"][:7]:
+        co = m["coefficient"]
+        if m.get("coefficients"):
+            cs = m["coefficients"]
+            lines.append(f"| {m['label']}{'' if m['refined'] else ' (screened)'} | "
+                         f"{m['probability']:.3g} | {m['log_evidence']:.1f} | "
+                         + "; ".join(f"{c['median']:.4g}" for c in cs) + " | "
+                         + "; ".join(f"{c['ci90'][0]:.4g} – {c['ci90'][1]:.4g}" for c in cs)
+                         + " | " + "; ".join(c["units"] for c in cs) + " |")
+        elif co is None:
+            lines.append(f"| {m['label']} | {m['probability']:.3g} | "
+                         f"{m['log_evidence']:.1f} | | | |")
+        else:
+            lines.append(f"| {m['label']}{'' if m['refined'] else ' (screened)'} | "
+                         f"{m['probability']:.3g} | {m['log_evidence']:.1f} | {co['median']:.4g} | "
+                         f"{co['ci90'][0]:.4g} – {co['ci90'][1]:.4g} | {co['units']} |")
+    titles, rows = stage_rows(d)
+    lines += ["", "## Fit: " + ", ".join(titles), "",
+              "| quantity | " + " | ".join(titles) + " |",
+              "|---|" + "---:|" * len(titles)]
+    lines += [f"| {q} | " + " | ".join(cells) + " |" for q, cells in rows]
+    for k in d["fit"]:
+        if d["fit"][k].get("note"):
+            lines.append(f"\n{STAGE_TITLES.get(k, k)}: {d['fit'][k]['note']}")
+    if d.get("hybrid"):
+        lines += _hybrid_markdown(d["hybrid"])
+    rem = d["mismatch"]["after"]
+    lines += ["", f"## What remains ({rem['model']})", "", rem["sentence"], ""]
+    lines += _mismatch_table(rem["by_recording"])
+    lines += ["", "## Where the nominal simulator disagrees", ""]
+    lines += _mismatch_table(d["mismatch"]["by_recording"])
     if d["notes"]:
         lines += ["", "## Notes", ""] + [f"* {n}" for n in d["notes"]]
     return "\n".join(lines) + "\n"

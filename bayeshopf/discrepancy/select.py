@@ -115,17 +115,22 @@ def _cdf(x, d):
 
 
 class Fitter:
-    """Whitened residuals of the simulator with one term against the measured features.
+    r"""Whitened residuals of the simulator with one term against the measured features.
 
     Args:
         system: The simulator with every term of ``lib`` (coefficients ``dc_<name>``).
         lib: The library.
         mf: The measured features.
         base: The simulator's orbits at the recordings with every coefficient 0.
+        model_error: Relative model error τ of the whitening,
+            :math:`\sigma^2 = \text{noise} + (\tau\,\text{ref})^2` (the floor above;
+            :mod:`~bayeshopf.discrepancy.calibration` infers it).
     """
 
-    def __init__(self, system: System, lib: Library, mf: MeasuredFeatures, base: OrbitBatch):
+    def __init__(self, system: System, lib: Library, mf: MeasuredFeatures, base: OrbitBatch,
+                 model_error: float = FLOOR_REL):
         self.system, self.lib, self.mf, self.base = system, lib, mf, base
+        self.model_error = float(model_error)
         self.params0 = {**system.params, **library_params(lib)}
         self.stable = np.array([b == "stable" for b in mf.branch])
         lay = mf.layout
@@ -137,12 +142,25 @@ class Fitter:
                               + 1j * (mf.y[:, lay.labels.index(f"{c}:Im1")]
                                       if f"{c}:Im1" in lay.labels else 0.0))
                        for c in lay.channels], axis=1)
-        floor = np.zeros_like(mf.y)
+        ref = np.zeros_like(mf.y)
         for j, (kind, ch) in enumerate(zip(lay.kind, lay.channel, strict=True)):
-            floor[:, j] = (FLOOR_FREQ * mf.y[:, 0] if kind == "f"
-                           else FLOOR_REL * h1[:, lay.channels.index(ch)])
-        self.sigma = np.sqrt(infl[:, None] * mf.se**2 + floor**2)
+            ref[:, j] = ((FLOOR_FREQ / FLOOR_REL) * mf.y[:, 0] if kind == "f"
+                         else h1[:, lay.channels.index(ch)])
+        #: σ² = noise + (model_error · ref)²: the segments' variance of the mean and
+        #: the scale of a relative model error (first-harmonic magnitude; a tenth
+        #: of the frequency for the frequency)
+        self.noise_var = infl[:, None] * mf.se**2
+        self.ref = ref
+        self.sigma = self.sigma_at(self.model_error)
         self.mean_cols = [j for j, k in enumerate(lay.kind) if k == "mean"]
+
+    def sigma_at(self, model_error: float) -> np.ndarray:
+        """Standard deviation of every feature, ``(R, P)``, at a relative model error."""
+        return np.sqrt(self.noise_var + (model_error * self.ref) ** 2)
+
+    def with_model_error(self, model_error: float) -> Fitter:
+        """The same fitter whitening with another relative model error."""
+        return Fitter(self.system, self.lib, self.mf, self.base, model_error)
 
     def features(self, ob: OrbitBatch) -> np.ndarray:
         """Simulated features ``(R, P)`` (NaN rows where an orbit is lost)."""

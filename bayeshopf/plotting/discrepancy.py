@@ -28,10 +28,13 @@ def _branch_curves(diagram, channel: str):
 
 
 def plot_discrepancy_diagram(report, ax=None):
-    """Peak-to-peak of the reference channel against μ: simulator, simulator + term, recordings.
+    """Peak-to-peak of the reference channel against μ: simulator, final model, recordings.
 
-    The recordings' amplitudes are the measured ones (offsets do not change a
-    peak-to-peak); the Bayesian hybrid fit's 90% band is drawn when the
+    The final model is the simulator with the most probable term or, after a
+    calibration of its uncertain parameters, the calibrated simulator (with the
+    term when one is missing; the calibrated simulator without it is then drawn
+    too). The recordings' amplitudes are the measured ones (offsets do not
+    change a peak-to-peak); the Bayesian hybrid fit's 90% band is drawn when the
     analysis ran it. ``ax``: the axes to draw into (a new figure when ``None``).
     """
     mf = report.extras["features"]
@@ -55,14 +58,21 @@ def plot_discrepancy_diagram(report, ax=None):
                                 lw=0, label="hybrid fit, 90% band" if kind == "stable" else None)
         except Exception:  # noqa: BLE001 - the band is an extra; the figure stands without it
             pass
+    ex = report.extras
+    b_label = ex.get("before_label", "simulator")
     for kind, mu, amp in _branch_curves(before["diagram"], ch):
         ax.plot(mu, amp, color="0.2", ls="-" if kind == "stable" else "--", lw=1.2,
-                label="simulator (stable, unstable dashed)" if kind == "stable" else None)
-    term = report.data["fit"]["after"]["term"]
+                label=f"{b_label} (stable, unstable dashed)" if kind == "stable" else None)
+    mid = ex.get("intermediate")
+    if mid is not None and mid.get("diagram") is not None:
+        for kind, mu, amp in _branch_curves(mid["diagram"], ch):
+            ax.plot(mu, amp, color="C0", ls="-" if kind == "stable" else "--", lw=1.0,
+                    alpha=0.8, label=mid["label"] if kind == "stable" else None)
+    a_label = ex.get("after_label") or f"simulator + {report.data['fit']['after']['term']}"
     if after.get("diagram") is not None:
         for kind, mu, amp in _branch_curves(after["diagram"], ch):
             ax.plot(mu, amp, color="C2", ls="-" if kind == "stable" else "--", lw=1.5,
-                    label=f"simulator + {term}" if kind == "stable" else None)
+                    label=a_label if kind == "stable" else None)
     for b in ("stable", "unstable"):
         sel = np.array([x == b for x in mf.branch])
         if sel.any():
@@ -74,10 +84,11 @@ def plot_discrepancy_diagram(report, ax=None):
                   fontsize=LABEL_SIZE)
     cu = system.observed_units.get(ch, "")
     ax.set_ylabel(f"{ch} peak-to-peak" + (f" ({cu})" if cu else ""), fontsize=LABEL_SIZE)
-    ax.set_title(report.data["verdict"]["kind"] + ": " + ", ".join(
-        report.data["verdict"]["terms"] or ["no term named"]), fontsize=TITLE_SIZE)
-    lo = min(mf.mu.min(), before["fold"] or mf.mu.min()) - 0.5
-    hi = max(mf.mu.max(), before["hopf"] or mf.mu.max()) + 0.5
+    v = report.data["verdict"]
+    named = list(v.get("terms") or []) + [f"{p} off" for p in v.get("parameters") or []]
+    ax.set_title(v["kind"] + ": " + ", ".join(named or ["no term named"]), fontsize=TITLE_SIZE)
+    lo = min([mf.mu.min()] + [p["fold"] for p in (before, after) if p.get("fold")]) - 0.5
+    hi = max([mf.mu.max()] + [p["hopf"] for p in (before, after) if p.get("hopf")]) + 0.5
     ax.set_xlim(lo, hi)
     ax.set_ylim(0, 1.3 * 2 * mf.amplitude[:, 0].max())
     style_axes(ax)
@@ -87,6 +98,11 @@ def plot_discrepancy_diagram(report, ax=None):
 
 def plot_orbit_residuals(report, ax=None):
     """Residual along the orbit (measured − simulated, offsets removed), before and after.
+
+    "After" is the final model of the analysis (``extras["after_orbits"]``: the
+    simulator with the most probable term, or the calibrated simulator, with
+    the term when one is missing; the calibrated simulator without the term is
+    then drawn too); older reports without it use the best term.
 
     One row per recording, one column per channel; the residual is in units of
     the channel and the grey band is ± the model-error floor plus noise of the
@@ -100,10 +116,18 @@ def plot_orbit_residuals(report, ax=None):
     fitter = report.extras["fitter"]
     lay = mf.layout
     base = report.extras["base"]
-    best = report.fits[0]
+    after = report.extras.get("after_orbits")
+    label = report.extras.get("after_label")
+    if after is None:
+        after, label = report.fits[0].orbits, f"+ {report.fits[0].term.name}"
     ys0 = fitter.features(base)
-    ys1 = fitter.features(best.orbits)
-    off0, off1 = fitter.offsets(base), fitter.offsets(best.orbits)
+    ys1 = fitter.features(after)
+    off0, off1 = fitter.offsets(base), fitter.offsets(after)
+    mid = report.extras.get("intermediate") or {}
+    mid_ob = mid.get("orbits")
+    if mid_ob is not None:
+        ysm, offm = fitter.features(mid_ob), fitter.offsets(mid_ob)
+    b_label = report.extras.get("before_label", "simulator")
     R, C = len(mf.names), len(lay.channels)
 
     def make():
@@ -114,7 +138,6 @@ def plot_orbit_residuals(report, ax=None):
     fig, flat = panels(ax, R * C, make)
     axes = np.asarray(flat[: R * C], dtype=object).reshape(R, C)
     th = 360.0 * np.arange(N_THETA) / N_THETA
-    term = best.term.name
     for r in range(R):
         for j, c in enumerate(lay.channels):
             ax = axes[r, j]
@@ -123,11 +146,14 @@ def plot_orbit_residuals(report, ax=None):
             ax.axhspan(-2 * s, 2 * s, color="0.88", lw=0)
             if base.ok[r]:
                 ax.plot(th, zm - off0[c] - curve(lay, ys0[r], c), color="0.3", lw=1,
-                        label="simulator")
-            if best.orbits.ok[r]:
+                        label=b_label)
+            if mid_ob is not None and mid_ob.ok[r]:
+                ax.plot(th, zm - offm[c] - curve(lay, ysm[r], c), color="C0", lw=0.9,
+                        label=mid["label"])
+            if after.ok[r]:
                 ax.plot(th, zm - off1[c] - curve(lay, ys1[r], c), color="C2", lw=1.2,
-                        label=f"+ {term}")
-            if not base.ok[r] and not best.orbits.ok[r]:
+                        label=label)
+            if not base.ok[r] and not after.ok[r]:
                 ax.text(0.5, 0.5, "no LCO of the simulator here", transform=ax.transAxes,
                         ha="center", va="center", fontsize=LEGEND_SIZE)
                 ax.set_yticks([])
@@ -149,7 +175,8 @@ def plot_orbit_residuals(report, ax=None):
                 handles.append(h_)
                 labels.append(l_)
     if own:
-        fig.legend(handles, labels, fontsize=LEGEND_SIZE, loc="outside upper center", ncols=2)
+        fig.legend(handles, labels, fontsize=LEGEND_SIZE, loc="outside upper center",
+                   ncols=min(len(labels), 3))
     else:
         axes[0, 0].legend(handles, labels, fontsize=LEGEND_SIZE)
     return fig
