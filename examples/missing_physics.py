@@ -40,15 +40,17 @@ from bayeshopf.discrepancy import analyse, simulate_with_effect  # noqa: E402
 from bayeshopf.simulators import get_system  # noqa: E402
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
-PLAN = [(15.75, "stable"), (16.25, "stable"), (16.75, "stable"), (17.25, "stable"),
-        (15.75, "unstable"), (16.25, "unstable"), (16.75, "unstable"), (17.25, "unstable")]
+# the truth's Hopf point is at 17.18 m/s (k_h +4%, c0 +3%, c_alpha -5%): record below it
+PLAN = [(15.5, "stable"), (16.0, "stable"), (16.5, "stable"), (17.0, "stable"),
+        (15.5, "unstable"), (16.0, "unstable"), (16.5, "unstable"), (17.0, "unstable")]
 
 
 def show(report) -> None:
     d = report.to_json()
     print(d["verdict"]["sentence"])
-    print(f"\n{'parameter':10s} {'nominal':>10s} {'median':>10s}  90% interval")
-    for p in d["calibration"]["parameters"]:
+    print(f"\nparameters named off ({d['parameters']['model']}):")
+    print(f"{'parameter':10s} {'nominal':>10s} {'median':>10s}  90% interval")
+    for p in d["parameters"]["table"]:
         if p["off"]:
             print(f"{p['name']:10s} {p['nominal']:10.4g} {p['median']:10.4g}  "
                   f"[{p['ci90'][0]:.4g}, {p['ci90'][1]:.4g}]  ({100 * p['shift']:+.1f}%)")

@@ -304,7 +304,7 @@ def _check_parameters(params, truth):
             assert abs(p.z - z_true) < 3.3 * p.z_sd, (p, true)
 
 
-@pytest.mark.slow  # 27 s alone on one core (two continuations and compilations, 14 terms)
+@pytest.mark.slow  # 50 s alone on one core (two continuations and compilations, 14 terms)
 def test_planted_parameter_errors_are_named_not_a_term():
     truth = _truth()
     rs = simulate_recordings(truth, [m for m, _ in PLAN], [b for _, b in PLAN], **KW)
@@ -322,7 +322,7 @@ def test_planted_parameter_errors_are_named_not_a_term():
     assert not v["remaining"]["significant"], v
 
 
-@pytest.mark.slow  # 47 s alone on one core
+@pytest.mark.slow  # 67 s alone on one core
 def test_hidden_force_with_planted_parameter_errors_is_named_as_a_term():
     # a cubic heave damping written here, not through the library: F_h = -c ḣ³
     c_true = 20.0
