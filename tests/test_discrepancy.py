@@ -17,7 +17,7 @@ import json
 import jax
 import numpy as np
 import pytest
-from notebook_runs import execute_fast
+from notebook_runs import execute_fast, stored
 
 jax.config.update("jax_enable_x64", True)
 
@@ -320,8 +320,8 @@ def test_example_script_runs_in_fast_mode(tmp_path):
     assert (tmp_path / "mp" / "blind" / "report.json").is_file()
 
 
-@pytest.mark.slow  # its fast mode repeats the default blind tests above (quadratic damping in
-# pitch, no effect, delayed_aero) in a fresh kernel
+@pytest.mark.slow  # its fast mode repeats the calibrated blind tests (three parameters off and
+# quadratic damping in pitch; no effect) in a fresh kernel
 @pytest.mark.notebooks
 def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
     run = execute_fast(REPO / "notebooks" / "04_missing_physics.ipynb", tmp_path, monkeypatch,
@@ -330,6 +330,33 @@ def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
     # calibrated by default (flutter3dof declares uncertain parameters)
     assert "the simulator lacks quadratic damping in pitch" in text
     assert "no effect: The simulator with its nominal parameters matches the recordings" in text
+    # scored against the truth: the three parameters and the term inside their intervals
+    rows = [ln.split() for ln in text.splitlines()
+            if ln.split()[:1] in (["k_h"], ["c0"], ["c_alpha"], ["alpha_quadratic_damping"])
+            and ln.rstrip().endswith(("True", "False"))]
+    assert [r[0] for r in rows] == ["k_h", "c0", "c_alpha", "alpha_quadratic_damping"], rows
+    assert all(r[-1] == "True" for r in rows), rows
+
+
+@pytest.mark.notebooks
+def test_stored_notebook_is_a_full_run_whose_numbers_are_the_readme_s():
+    """The stored run (default settings, 20 s records, the rig) against the README's numbers."""
+    run = stored(REPO / "notebooks" / "04_missing_physics.ipynb")
+    assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
+    assert not run.errors and "fast mode: False" in run.text
+    assert "calibrate=" not in "".join(c.source for c in run.code)   # the default: calibrated
+    readme = (REPO / "README.md").read_text()
+    text = run.text
+    # the blind run's hybrid fit, quoted in the README's limits
+    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.202]; fold 14.149 " \
+           "[14.008, 14.250]" in text
+    assert "Hopf 17.194 [17.188, 17.202] m/s, fold 14.149 [14.008, 14.250] m/s" in \
+        " ".join(readme.split())
+    # the rig: the hybrid fit's fold as the README gives it, the calibrated fold
+    assert "fold 14.210 [13.740, 14.504]" in text and "14.21 [13.74, 14.50]" in readme
+    assert "after      Hopf 17.929 m/s, fold 15.342 m/s" in text
+    assert "its fold moves to 15.3 m/s" in " ".join(readme.split())
+    assert run.n_images == 3
 
 
 @pytest.mark.slow

@@ -142,6 +142,19 @@ def test_cli_writes_and_prints_the_calibrated_report(cli_run):
         assert (out / "figures" / f).stat().st_size > 10_000
 
 
+def test_diagram_title_names_terms_then_parameters_and_wraps():
+    from bayeshopf.plotting.discrepancy import diagram_title
+
+    params = ["k_h", "k_alpha", "c_h", "c_alpha", "c3", "k_alpha2", "k_alpha3", "c0", "c1"]
+    title = diagram_title({"kind": "term missing", "parameters": params,
+                           "terms": ["h_quadratic_damping", "h_cubic_damping"]}, width=56)
+    lines = title.splitlines()
+    assert lines[0] == "term missing: h_quadratic_damping + h_cubic_damping"
+    assert lines[1].startswith("9 parameters off: k_h, k_alpha")
+    assert len(lines) == 3 and max(map(len, lines)) <= 56
+    assert diagram_title({"kind": "none", "terms": [], "parameters": []}) == "none"
+
+
 @pytest.mark.parametrize(("flag", "expected"), [([], None), (["--no-calibration"], False)])
 def test_no_calibration_flag_reaches_the_analysis(perturbed, tmp_path, monkeypatch, flag,
                                                   expected):

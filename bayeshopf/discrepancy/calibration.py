@@ -182,7 +182,7 @@ from bayeshopf.simulators.registry import get_system
 
 __all__ = ["CalibratedPairFit", "CalibratedTermFit", "Calibration", "CalibrationError",
            "CalibrationReport", "ModelError", "ParameterPosterior",
-           "calibrate", "fit_pair", "fit_parameters", "fit_term", "laplace_evidence",
+           "calibrate", "fit_parameters", "fit_term", "laplace_evidence",
            "refit_pair", "refit_term", "screen_pair", "screen_second", "screen_term",
            "term_marginal"]
 
@@ -1139,31 +1139,6 @@ def screen_second(unc: Sequence[UncertainParameter], first: CalibratedTermFit, t
     ob, E = prob.solve(x0)
     return _pair_fit(fitter, unc, (first.term, term), prob.nominal, x0, ob, E,
                      prob.jacobian(x0), refined=False)
-
-
-def fit_pair(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Term, Term],
-             cal: Calibration, *, max_nfev: int = MAX_NFEV) -> CalibratedPairFit:
-    """Two terms' coefficients fitted jointly with the uncertain parameters.
-
-    Starts from the better of the calibration (both coefficients 0) and the mode
-    of the linear model there, as :func:`fit_term`.
-    """
-    d = len(unc)
-    x0 = np.concatenate([cal.z_mode, [0.0, 0.0]])
-    sd = np.sqrt(np.clip(np.diag(cal.cov), 0.0, None))
-    prob = _Problem(fitter, unc, terms, [(np.zeros(d + 2), fitter.base), (x0, cal.orbits)],
-                    known=[(cal.z_mode, cal.jac), (np.zeros(d), cal.jac_nominal)],
-                    h0=np.concatenate([np.clip(0.1 * sd, 1e-5, 1e-2), [1e-3, 1e-3]]))
-    _, E0 = prob.solve(x0)
-    _, delta, _ = laplace_evidence(E0, prob.jacobian(x0))
-    x_lin = x0 + delta
-    for k, t in enumerate(terms):
-        if t.positive:
-            x_lin[d + k] = max(x_lin[d + k], 0.0)
-    _, E_lin = prob.solve(x_lin)
-    x, ob, E, G, _ = _minimise(prob, x_lin if E_lin @ E_lin < E0 @ E0 else x0, max_nfev)
-    return _pair_fit(fitter, unc, tuple(terms), prob.nominal, x, ob, E, G, refined=True,
-                     prob=prob)
 
 
 # --------------------------------------------------------------------- refits

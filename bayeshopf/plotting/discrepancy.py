@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from bayeshopf.plotting._style import (
     style_axes,
 )
 
-__all__ = ["plot_discrepancy", "plot_discrepancy_diagram", "plot_orbit_residuals"]
+__all__ = ["diagram_title", "plot_discrepancy", "plot_discrepancy_diagram", "plot_orbit_residuals"]
 
 
 def _branch_curves(diagram, channel: str):
@@ -84,16 +85,35 @@ def plot_discrepancy_diagram(report, ax=None):
                   fontsize=LABEL_SIZE)
     cu = system.observed_units.get(ch, "")
     ax.set_ylabel(f"{ch} peak-to-peak" + (f" ({cu})" if cu else ""), fontsize=LABEL_SIZE)
-    v = report.data["verdict"]
-    named = list(v.get("terms") or []) + [f"{p} off" for p in v.get("parameters") or []]
-    ax.set_title(v["kind"] + ": " + ", ".join(named or ["no term named"]), fontsize=TITLE_SIZE)
+    ax.set_title(diagram_title(report.data["verdict"]), fontsize=TITLE_SIZE)
     lo = min([mf.mu.min()] + [p["fold"] for p in (before, after) if p.get("fold")]) - 0.5
     hi = max([mf.mu.max()] + [p["hopf"] for p in (before, after) if p.get("hopf")]) + 0.5
     ax.set_xlim(lo, hi)
     ax.set_ylim(0, 1.3 * 2 * mf.amplitude[:, 0].max())
     style_axes(ax)
-    ax.legend(fontsize=LEGEND_SIZE, loc="upper left")
+    # below the axes: inside, the key covered the largest recorded orbit on the rig
+    ax.legend(fontsize=LEGEND_SIZE, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
+              frameon=False)
     return fig
+
+
+def diagram_title(verdict: dict, width: int = 70) -> str:
+    """The verdict in a title: its kind and terms, then the parameters named off.
+
+    Lines are wrapped at ``width`` characters, e.g. ``"term missing:
+    h_quadratic_damping + h_cubic_damping"`` over ``"7 parameters off: k_h,
+    k_alpha, …"``.
+    """
+    terms = " + ".join(verdict.get("terms") or [])
+    params = list(verdict.get("parameters") or [])
+    head = verdict["kind"] + (f": {terms}" if terms else "")
+    lines = [head]
+    if params:
+        n = len(params)
+        lines.append(f"{n} parameter{'s' if n > 1 else ''} off: " + ", ".join(params))
+    elif not terms:
+        lines[0] += ": no term named" if verdict["kind"] != "none" else ""
+    return "\n".join(textwrap.fill(x, width) for x in lines)
 
 
 def plot_orbit_residuals(report, ax=None):
