@@ -588,6 +588,15 @@ def markdown(sets: list[dict], sources: list[str]) -> str:
     if cov:
         lines += ["", "90% intervals holding the truth, classes b–c (all perturbed parameters of "
                   "a set at once): " + "; ".join(cov) + "."]
+    for code, label in (("b", "(b) parameters off"), ("c", "(c) term missing")):
+        rs_ = [r for r in sets if "report" in r and r["code"] == code]
+        named = [(set(r["report"]["verdict"].get("parameters") or []),
+                  set(r["truth"].get("perturbed", {}))) for r in rs_]
+        if named:
+            lines += ["", f"Parameters named off by the verdicts of {label}: perturbed ones "
+                      f"{sum(len(n & p) for n, p in named)} of {sum(len(p) for _, p in named)}; "
+                      f"unperturbed ones {sum(len(n - p) for n, p in named)} times, in "
+                      f"{sum(bool(n - p) for n, p in named)} of {len(named)} sets."]
     marg = marginal_coverage(sets)
     lines += ["", "Each parameter's 90% interval on its own (the truth: nominal × (1 + the "
               "planted shift), nominal where none was planted), in the model that holds the "

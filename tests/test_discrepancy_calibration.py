@@ -279,6 +279,34 @@ def test_screened_pair_evidence_is_the_exact_linear_gaussian_one():
         pytest.approx(exact, abs=1e-9)
 
 
+def test_parameters_are_named_off_at_a_family_wise_level():
+    """With every parameter nominal and its posterior mean drawn N(0, sd²), the verdict names
+    any of d = 11 off with probability ≤ OFF_LEVEL (Bonferroni), not 1 − 0.9¹¹ ≈ 0.69."""
+    from bayeshopf.discrepancy.calibration import (
+        OFF_LEVEL,
+        Z90,
+        ParameterPosterior,
+        off_threshold,
+    )
+
+    d = len(FLUTTER3DOF.uncertain)
+    z_c = off_threshold(d)
+    assert z_c == pytest.approx(stats.norm.isf(OFF_LEVEL / (2 * d)), rel=1e-12)
+    assert off_threshold(1) == pytest.approx(Z90, rel=1e-12)
+    z = np.random.default_rng(0).normal(size=(20000, d))
+    any_off = np.mean(np.any(np.abs(z) > z_c, axis=1))
+    assert 0.085 < any_off <= OFF_LEVEL + 0.005, any_off      # exact: 1 − (1 − 0.1/11)¹¹
+    assert np.mean(np.any(np.abs(z) > Z90, axis=1)) > 0.6     # what 90% intervals would do
+
+    def post(z, pinned=None):
+        return ParameterPosterior("k_h", "N/m", "lognormal", 0.1, 1.0, 1.0, (0.9, 1.1),
+                                  z=z, z_sd=0.01, pinned=pinned, z_off=z_c)
+
+    assert not post(0.02).off                     # its 90% interval excludes nominal
+    assert post(0.03).off and not post(0.03, pinned=z_c**2 - 0.1).off
+    assert post(-0.03, pinned=z_c**2 + 0.1).off
+
+
 # ------------------------------------------------------- blind analyses (slow)
 
 PLAN = [(15.75, "stable"), (16.75, "stable"), (15.75, "unstable"), (16.75, "unstable")]

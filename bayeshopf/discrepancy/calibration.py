@@ -90,10 +90,18 @@ nominal than from that compromise.
 :math:`z` block for :math:`M_k`); each parameter's median is
 :math:`\theta(\hat z_j)` and its 90% interval
 :math:`\theta(\hat z_j \pm 1.645\,\mathrm{sd}_j)`, in physical units (the maps
-are monotone). A parameter is **off** when that interval excludes its nominal value
-and, for the verdict's model, a refit with the parameter pinned at nominal
-raises :math:`-2\log p(x\mid y)` by more than the 90% quantile of :math:`\chi^2_1`
-(:func:`check_off`): the posterior of the aerodynamic lag coefficients is not
+are monotone). A parameter is named **off** when its posterior mean lies more
+than :math:`z_c` standard deviations from nominal, :math:`z_c = \Phi^{-1}(1 -
+0.1/(2d))` over the :math:`d` declared parameters (2.61 for flutter3dof's 11;
+:data:`OFF_LEVEL`, :func:`off_threshold`), and, for the verdict's model, a refit
+with the parameter pinned at nominal raises :math:`-2\log p(x\mid y)` by more
+than :math:`z_c^2` (:func:`check_off`). The 90% intervals are reported as they
+are; the stricter test keeps the verdict from naming a nominal parameter off by
+chance: with 90% intervals each nominal parameter is named with probability
+about 0.1, and the verdicts of the reliability benchmark's first run named
+unperturbed parameters off 8 times in 6 of its 14 sets with parameters off,
+and 33 times in 12 of its 21 sets with a term missing. The pinned refit is
+there because the posterior of the aerodynamic lag coefficients is not
 Gaussian (on a planted cubic pitch stiffness it has a second mode, 0.6 higher
 in :math:`-2\log p`, behind a ridge of 38, where c1, c2, c4 sit 5–15% from
 nominal), and the Laplace interval of one mode can exclude a nominal value
@@ -219,8 +227,10 @@ REFIT_FACTOR = 1.5
 MIN_MODEL_ERROR = 1e-3
 #: A model explains a mismatch when it leaves at most this share of the nominal model error.
 EXPLAINED_FACTOR = 0.5
-#: 90% quantile of χ²₁: the profile-likelihood threshold of a parameter named off.
-PROFILE_90 = float(stats.chi2.ppf(0.9, 1))
+#: Family-wise level of the parameters named off: with every parameter at its nominal
+#: value, the verdict names one or more of the d declared parameters off with probability
+#: at most this (Bonferroni: each at level OFF_LEVEL / d; :func:`off_threshold`).
+OFF_LEVEL = 0.1
 #: Largest number of residual evaluations of a pinned refit.
 PROFILE_NFEV = 10
 #: Pairs of terms are screened among this many best single terms.
@@ -254,6 +264,8 @@ class ParameterPosterior:
         pinned: Rise of :math:`-2\log p(x\mid y)` at the mode when this parameter
             is pinned at its nominal value and the others are refitted (a
             profile-likelihood check of "off"; ``None``: not checked).
+        z_off: How many posterior standard deviations from nominal name it off
+            (:func:`off_threshold`; :data:`Z90`: its 90% interval).
     """
 
     name: str
@@ -266,17 +278,18 @@ class ParameterPosterior:
     z: float
     z_sd: float
     pinned: float | None = None
+    z_off: float = Z90
 
     @property
     def off(self) -> bool:
-        r"""Whether the 90% interval excludes the nominal value.
+        r"""Whether the posterior puts nominal more than :attr:`z_off` standard deviations away.
 
-        Where :func:`check_off` checked it, pinning the parameter at nominal must
-        also cost more than the 90% quantile of :math:`\chi^2_1`.
+        :math:`|\hat z| > z_{\rm off}\,\mathrm{sd}` (the nominal value is
+        :math:`z = 0`); where :func:`check_off` checked it, pinning the parameter at
+        nominal must also cost more than :math:`z_{\rm off}^2` in :math:`-2\log p`.
         """
-        lo, hi = sorted(self.ci90)
-        return not (lo <= self.nominal <= hi) and (self.pinned is None
-                                                   or self.pinned > PROFILE_90)
+        return abs(self.z) > self.z_off * self.z_sd and (self.pinned is None
+                                                        or self.pinned > self.z_off**2)
 
     @property
     def shift(self) -> float:
@@ -288,7 +301,8 @@ class ParameterPosterior:
         return {"name": self.name, "units": self.units, "prior": self.prior,
                 "prior_scale": self.prior_scale, "nominal": self.nominal,
                 "median": self.median, "ci90": list(self.ci90), "shift": self.shift,
-                "off": self.off, "z": self.z, "z_sd": self.z_sd, "pinned": self.pinned}
+                "off": self.off, "z": self.z, "z_sd": self.z_sd, "z_off": self.z_off,
+                "pinned": self.pinned}
 
 
 @dataclass(frozen=True)
@@ -340,7 +354,7 @@ class Calibration:
 
     @property
     def off(self) -> tuple[str, ...]:
-        """The parameters whose 90% interval excludes their nominal value."""
+        """The parameters named off (:attr:`ParameterPosterior.off`)."""
         return tuple(p.name for p in self.parameters if p.off)
 
     def values(self) -> dict[str, float]:
@@ -493,16 +507,30 @@ class CalibrationReport:
 # --------------------------------------------------------------------------- engine
 
 
+def off_threshold(d: int, level: float = OFF_LEVEL) -> float:
+    r"""Standard normal quantile :math:`z_c = \Phi^{-1}(1 - \mathrm{level}/(2d))` for naming off.
+
+    A parameter is named off when its posterior mean lies more than
+    :math:`z_c` posterior standard deviations from nominal (and the pinned
+    refit of :func:`check_off` costs more than :math:`z_c^2`). Over ``d``
+    parameters at nominal this names any of them with probability at most
+    ``level`` (Bonferroni). ``d = 11`` (flutter3dof), level 0.1: :math:`z_c`
+    = 2.61, each parameter at the 99.1% level; ``d = 1``: the 90% interval.
+    """
+    return float(stats.norm.ppf(1.0 - level / (2 * max(int(d), 1))))
+
+
 def _posteriors(unc: Sequence[UncertainParameter], nominal: np.ndarray, units: Sequence[str],
                 z: np.ndarray, cov: np.ndarray) -> tuple[ParameterPosterior, ...]:
     out = []
+    z_off = off_threshold(len(unc))
     for j, u in enumerate(unc):
         sd = float(np.sqrt(max(cov[j, j], 0.0)))
         lo, hi = (float(u.value(z[j] + s * Z90 * sd, nominal[j])) for s in (-1, 1))
         out.append(ParameterPosterior(
             name=u.name, units=units[j], prior=u.prior, prior_scale=u.scale,
             nominal=float(nominal[j]), median=float(u.value(z[j], nominal[j])),
-            ci90=(min(lo, hi), max(lo, hi)), z=float(z[j]), z_sd=sd))
+            ci90=(min(lo, hi), max(lo, hi)), z=float(z[j]), z_sd=sd, z_off=z_off))
     return tuple(out)
 
 
@@ -1172,7 +1200,7 @@ def refit_pair(fitter: Fitter, unc: Sequence[UncertainParameter], fit: Calibrate
 def check_off(fitter: Fitter, unc: Sequence[UncertainParameter], terms: Sequence[Term],
               x: np.ndarray, orbits: OrbitBatch, params: Sequence[ParameterPosterior],
               tau: float, *, max_nfev: int = PROFILE_NFEV) -> tuple[ParameterPosterior, ...]:
-    r"""Profile-likelihood check of each parameter whose Laplace interval excludes nominal.
+    r"""Profile-likelihood check of each parameter whose Laplace posterior names it off.
 
     The Laplace interval is a local, Gaussian statement; where the posterior
     has a second mode or a curved ridge (the aerodynamic lag coefficients trade
@@ -1180,7 +1208,7 @@ def check_off(fitter: Fitter, unc: Sequence[UncertainParameter], terms: Sequence
     that parameter pinned at nominal explains as well. For each such
     parameter the others (and the terms) are refitted with it pinned; it stays
     "off" when :math:`-2\log p(x\mid y)`, at the model error ``tau``, rises by more
-    than :data:`PROFILE_90`.
+    than the parameter's :math:`z_{\rm off}^2` (:func:`off_threshold`).
 
     Args:
         fitter: The residuals of the fit.
@@ -1218,7 +1246,7 @@ def check_off(fitter: Fitter, unc: Sequence[UncertainParameter], terms: Sequence
         ob0, E0 = prob.solve(x0)
         rise = obj(E0, ob0.ok) - base
         x1, ob1 = x0, ob0
-        if rise > PROFILE_90:
+        if rise > p.z_off**2:
             x1, ob1, E1, _, _ = _minimise(prob, x0, max_nfev)
             rise = min(rise, obj(E1, ob1.ok) - base)
         if rise < lowest:
