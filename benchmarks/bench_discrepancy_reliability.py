@@ -183,19 +183,13 @@ def draw(seed: int, cls: str, attempt: int) -> dict:
            "size_range": None}
     if cls == "parameters off":
         out["perturbed"] = draw_base_errors(rng)
-    elif cls == "term missing":
-        names = sorted(TERM_SIZES)
-        term = names[int(rng.integers(len(names)))]
-        lo, hi = TERM_SIZES[term]
-        out.update(effect=term, effect_kind="library", size=_log_uniform(rng, lo, hi),
-                   size_range=[lo, hi])
-        if rng.random() < P_BASE_ERRORS:
-            out["perturbed"] = draw_base_errors(rng)
-    elif cls == "independent effect":
-        names = sorted(IE_SIZES)
+    elif cls in ("term missing", "independent effect"):
+        sizes, kind = ((TERM_SIZES, "library") if cls == "term missing"
+                       else (IE_SIZES, "independent"))
+        names = sorted(sizes)
         eff = names[int(rng.integers(len(names)))]
-        lo, hi = IE_SIZES[eff]
-        out.update(effect=eff, effect_kind="independent", size=_log_uniform(rng, lo, hi),
+        lo, hi = sizes[eff]
+        out.update(effect=eff, effect_kind=kind, size=_log_uniform(rng, lo, hi),
                    size_range=[lo, hi])
         if rng.random() < P_BASE_ERRORS:
             out["perturbed"] = draw_base_errors(rng)
