@@ -685,7 +685,7 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         conv = ci.convergence(run.chains)
         d["posterior"] = {"method": "nuts", "chains": int(next(iter(run.chains.values())).shape[0]),
                           "divergences": run.divergences, "r_hat_max": ci.RHAT_MAX,
-                          "ess_min": ci.ESS_MIN, "sites": conv}
+                          "ess_min": ci.ESS_MIN, "sites": conv, **run.sampler}
         for k, v in conv.items():
             if not v["ok"]:
                 warnings.append(f"NUTS: {k} has R̂ {v['r_hat']:.3f} and bulk ESS "

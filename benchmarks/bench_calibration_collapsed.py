@@ -93,9 +93,9 @@ def summary(short: bool, out: Path = OUT) -> None:
 
 
 def main(argv):
-    from bayeshopf.inference.cache import single_thread_eigen
+    from bayeshopf.inference.cache import configure_xla_cpu
 
-    single_thread_eigen()    # before any JAX work, as the CLI does
+    configure_xla_cpu()    # before any JAX work, as the CLI does
     short = "--short" in argv
     ta = float(argv[argv.index("--target-accept") + 1]) if "--target-accept" in argv else None
     out = OUT if ta is None else OUT.with_name(f"{OUT.name}_ta{ta:g}")

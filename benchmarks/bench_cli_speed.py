@@ -1,11 +1,14 @@
 """Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
 
-Run: ``python benchmarks/bench_cli_speed.py [--repeat N]`` on an otherwise idle
-machine. Each run is a fresh process; "cold" uses an empty compilation cache
+Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters]`` on an
+otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
 (``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
 cache the cold run filled. Prints a Markdown table and writes
 ``benchmarks/cli_speed.json`` with the stage timings from each ``summary.json``
-and the machine's CPU count and load before each run.
+and the machine's CPU count and load before each run. ``--fusion-emitters`` runs
+with XLA's CPU fusion emitters, which ``inference.cache.configure_xla_cpu`` turns
+off by default (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true``), and writes
+``benchmarks/cli_speed_fusion_emitters.json``.
 """
 
 import json
@@ -21,9 +24,13 @@ RIG = HERE.parent.parent / "shared/data/flutter_cbc"
 EXE = str(Path(sys.executable).with_name("bayeshopf"))
 
 
+XLA_FLAGS = os.environ.get("XLA_FLAGS", "")
+
+
 def timed(args, cache):
     out = Path(tempfile.mkdtemp()) / "fit"
-    env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(cache), "MPLBACKEND": "Agg"}
+    env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(cache), "MPLBACKEND": "Agg",
+           "XLA_FLAGS": XLA_FLAGS}
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
     subprocess.run([EXE, *args, "--out", str(out), "--quiet"], env=env, check=True,
@@ -34,15 +41,15 @@ def timed(args, cache):
             "stages_s": summary.get("timings_s", {})}
 
 
-def main(repeat=1):
+def main(repeat=1, name="cli_speed"):
     rows = []
     for _ in range(repeat):
         cache = Path(tempfile.mkdtemp())
         rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache)})
         rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache)})
         rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()))})
-    (HERE / "cli_speed.json").write_text(json.dumps(
-        {"cpu_count": os.cpu_count(), "runs": rows}, indent=1))
+    (HERE / f"{name}.json").write_text(json.dumps(
+        {"cpu_count": os.cpu_count(), "xla_flags": XLA_FLAGS, "runs": rows}, indent=1))
     print("| case | wall (s) | load before | stages (s) |\n|---|---:|---:|---|")
     for r in rows:
         st = ", ".join(f"{k} {v:.1f}" for k, v in r["stages_s"].items())
@@ -50,4 +57,7 @@ def main(repeat=1):
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1)
+    if "--fusion-emitters" in sys.argv:
+        XLA_FLAGS = f"{XLA_FLAGS} --xla_cpu_use_fusion_emitters=true".strip()
+    main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
+         "cli_speed_fusion_emitters" if "--fusion-emitters" in sys.argv else "cli_speed")

@@ -53,6 +53,9 @@ def run(name, rs, truth=None):
 
 
 def main(which="both"):
+    from bayeshopf.inference.cache import configure_xla_cpu
+
+    configure_xla_cpu()    # before any JAX work, as the CLI does
     results = []
     if which in ("rig", "both"):
         from bayeshopf.data import load_recordings

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import atomic_write, rig_recordings  # noqa: E402
 
-from bayeshopf.inference.cache import single_thread_eigen  # noqa: E402
+from bayeshopf.inference.cache import configure_xla_cpu  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
@@ -66,7 +66,7 @@ def markdown(psis: dict, exact: dict | None, names, seconds: dict, fast: bool) -
 
 
 def main() -> int:
-    single_thread_eigen()
+    configure_xla_cpu()
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_auto
 

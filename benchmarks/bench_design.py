@@ -173,9 +173,9 @@ def main(argv=None) -> int:
                     help="keep the campaigns already in the output's .json and run only the "
                          "seeds it lacks")
     args = ap.parse_args(argv)
-    from bayeshopf.inference.cache import single_thread_eigen
+    from bayeshopf.inference.cache import configure_xla_cpu
 
-    single_thread_eigen()
+    configure_xla_cpu()
     a, b = (int(x) for x in args.seeds.split(":"))
     results = []
     stem = Path(args.out)

@@ -28,6 +28,9 @@ def _maps():
 
 
 def main(unfolding="curved"):
+    from bayeshopf.inference.cache import configure_xla_cpu
+
+    configure_xla_cpu()    # before any JAX work, as the CLI does
     from bayeshopf.data import load_recordings
     from bayeshopf.diagnostics.summaries import interval
     from bayeshopf.features.harmonics import extract_harmonics

@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 import bayeshopf as bh
-from bayeshopf.inference.cache import single_thread_eigen
+from bayeshopf.inference.cache import configure_xla_cpu
 from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import plot_phase_portraits, save_figure
 from bayeshopf.plotting.truth import plot_diagram_vs_truth
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", nargs="?", default=None, help="output folder (default: temporary)")
     ap.add_argument("--system", choices=("vanderpol", "flutter3dof", "both"), default="both")
     args = ap.parse_args(argv)
-    single_thread_eigen()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
+    configure_xla_cpu()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bayeshopf-section4-"))
     out.mkdir(parents=True, exist_ok=True)
     settings = CollapsedSettings.fast() if FAST else CollapsedSettings()

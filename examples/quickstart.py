@@ -26,7 +26,7 @@ import numpy as np
 import bayeshopf as bh
 from bayeshopf.data.synthetic import demo_system
 from bayeshopf.diagnostics.summaries import interval
-from bayeshopf.inference.cache import single_thread_eigen
+from bayeshopf.inference.cache import configure_xla_cpu
 from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import plot_all
 from bayeshopf.posterior import fit_hybrid
@@ -37,7 +37,7 @@ NEW_MU = 17.0
 
 
 def main(argv: list[str]) -> int:
-    single_thread_eigen()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
+    configure_xla_cpu()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
     out = Path(argv[1]) if len(argv) > 1 else Path(tempfile.mkdtemp(prefix="bayeshopf-quickstart-"))
 
     # 1. Recordings: 4 stable and 3 unstable LCOs of a system whose truth we know.

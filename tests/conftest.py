@@ -27,9 +27,9 @@ def _pin_xdist_worker() -> None:
 _pin_xdist_worker()
 
 from bayeshopf._x64 import ensure_x64  # noqa: E402  (after the pinning: it imports JAX)
-from bayeshopf.inference.cache import single_thread_eigen  # noqa: E402
+from bayeshopf.inference.cache import configure_xla_cpu  # noqa: E402
 
-single_thread_eigen()   # before any JAX work (bayeshopf.inference.cache)
+configure_xla_cpu()   # before any JAX work (bayeshopf.inference.cache)
 ensure_x64()   # tests of the low-level blocks (bayeshopf.model) compute in float64 too;
 #                tests/test_x64.py checks, in a fresh process, that import leaves it off
 

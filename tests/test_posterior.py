@@ -32,6 +32,10 @@ def test_planted_orbits_fitted_and_diagnostics_reported(planted):
     d = post.diagnostics
     assert d["map"]["converged"] and d["map"]["grad_norm"] < 1e-4
     assert set(d["posterior"]["sites"]) >= {"mu0", "a2", "mu_fold"}
+    # NUTS started from the MAP's Laplace covariance, and its cost is reported
+    assert d["posterior"]["mass_matrix_start"] == "laplace"
+    assert 1 <= d["posterior"]["leapfrog_steps_draws"] <= 2**SETTINGS.max_tree_depth
+    assert post.samples["mu0"].shape == (SETTINGS.num_chains * SETTINGS.num_samples,)
     for e in d["fit"]["orbit_error"]:
         assert e["relative"] < 0.03, e
     # the posterior-median orbit against the planted orbit (not the noisy data)

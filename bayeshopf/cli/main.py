@@ -507,9 +507,9 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         from bayeshopf._x64 import ensure_x64
-        from bayeshopf.inference.cache import enable_compilation_cache, single_thread_eigen
+        from bayeshopf.inference.cache import configure_xla_cpu, enable_compilation_cache
 
-        single_thread_eigen()       # before any JAX work: XLA's Eigen pool stalls on CPU
+        configure_xla_cpu()       # before any JAX work (bayeshopf.inference.cache)
         enable_compilation_cache()  # before any JAX work, so every compilation is cached
         ensure_x64()                # bayeshopf computes in float64
         return COMMANDS[args.command](args)

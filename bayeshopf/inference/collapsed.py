@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from jax.flatten_util import ravel_pytree
-from numpyro.infer import MCMC, NUTS, SVI, Predictive, Trace_ELBO, init_to_value
+from numpyro.infer import NUTS, SVI, Predictive, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
 
@@ -190,9 +190,7 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     ensure_x64()
     spec = kwargs["spec"]
     init = _initial_values(spec)
-    info = initialize_model(jax.random.PRNGKey(0), cm.collapsed_model, model_kwargs=kwargs,
-                            init_strategy=init_to_value(values=init))
-    z0, unravel = ravel_pytree(info.param_info.z)
+    info, unravel = model_functions(kwargs, init)
     potential = jax.jit(lambda x: info.potential_fn(unravel(x)))
     names = ("gap_fold", "gap_hopf") if spec.criticality == "subcritical" else ("gap_hopf",
                                                                                   "kappa")
@@ -240,23 +238,104 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     )
 
 
+def model_functions(kwargs: dict, init: dict):
+    """NumPyro's potential energy and postprocessing of the collapsed model, and its layout.
+
+    One eager run of the model (``initialize_model``) for each data set, shared
+    by the MAP and NUTS stages: the last one is kept, and reused when every
+    argument is the same object.
+
+    Returns:
+        ``(info, unravel)``: NumPyro's ``ModelInfo`` at ``init`` and the function
+        that turns a flat unconstrained vector into the dict of sites.
+    """
+    args = tuple(kwargs.items())
+    hit = _MODEL_INFO.get("last")
+    if (hit is not None and hit[1] == sorted(init) and len(hit[0]) == len(args)
+            and all(k == k2 and v is v2 for (k, v), (k2, v2) in zip(hit[0], args, strict=True))):
+        return hit[2]
+    info = initialize_model(jax.random.PRNGKey(0), cm.collapsed_model, model_kwargs=kwargs,
+                            init_strategy=init_to_value(values=init))
+    out = (info, ravel_pytree(info.param_info.z)[1])
+    _MODEL_INFO["last"] = (args, sorted(init), out)   # one data set at a time
+    return out
+
+
+_MODEL_INFO: dict = {}
+
+
+def clear_model_functions() -> None:
+    """Forget the cached model functions (``inference.cache.release_compiled``)."""
+    _MODEL_INFO.clear()
+
+
+def laplace_covariance(potential, x) -> np.ndarray | None:
+    """The inverse Hessian of the potential at ``x`` (the Laplace approximation's covariance).
+
+    ``None`` when the Hessian is not positive definite there (a MAP on a ridge or
+    at a boundary), so that NUTS starts from the identity instead.
+    """
+    H = np.asarray(jax.jit(jax.hessian(potential))(x))
+    H = 0.5 * (H + H.T)
+    if not np.all(np.isfinite(H)) or np.linalg.eigvalsh(H)[0] <= 0:
+        return None
+    return np.linalg.inv(H)
+
+
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
-    latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
-    mcmc = MCMC(NUTS(cm.collapsed_model, init_strategy=init_to_value(values=latent),
-                     dense_mass=settings.dense_mass,
-                     target_accept_prob=settings.target_accept,
-                     max_tree_depth=settings.max_tree_depth),
-                num_warmup=settings.num_warmup, num_samples=settings.num_samples,
-                num_chains=settings.num_chains, chain_method="sequential", progress_bar=False)
-    # sequential, not vectorized: XLA's batched Cholesky and triangular solves are
-    # slow on CPU (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential);
-    # not parallel either: one CPU device per chain (pmap) took 31 s on the rig's
-    # 2 cores against 13 s sequential; nor two Python threads of 2 chains each on a
-    # pre-traced potential (13.5 s against 11.0 s for one thread of 4 chains)
-    mcmc.run(key, **kwargs)
-    chains = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
-    divergences = int(np.sum(np.asarray(mcmc.get_extra_fields()["diverging"])))
-    return chains, divergences
+    """NumPyro's NUTS kernel from the MAP point, every chain in one compiled call.
+
+    The mass matrix starts at the MAP's Laplace covariance (the inverse Hessian
+    of the potential there) and is adapted from it. From the identity, the
+    windowed adaptation spends its first windows on deep trees: on the 3-DOF demo
+    39.5 leapfrog steps per warm-up iteration against 15.8 from the Laplace
+    covariance (seed 0, 4 × (500 + 500); ``docs/inference_core.md``).
+
+    The chains run one after another inside a single ``jit`` (``lax.map`` over
+    their keys), warm-up and draws in one ``scan``: one trace and one compilation
+    for all of them, where ``MCMC`` with ``chain_method="sequential"`` traces
+    each chain's loops and runs the model eagerly once per chain. Not vectorized:
+    XLA's batched Cholesky and triangular solves are slow on CPU (NUTS stage of
+    the 3-DOF demo: 76 s vectorized, 43 s sequential); not parallel either: one
+    CPU device per chain (pmap) took 31 s on the rig's 2 cores against 13 s
+    sequential.
+    """
+    info, unravel = model_functions(kwargs, _initial_values(kwargs["spec"]))
+    x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
+
+    def potential(x):
+        return info.potential_fn(unravel(x))
+
+    cov = laplace_covariance(potential, x0) if settings.dense_mass else None
+    kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
+                  inverse_mass_matrix=None if cov is None else jnp.asarray(cov),
+                  target_accept_prob=settings.target_accept,
+                  max_tree_depth=settings.max_tree_depth)
+    n_warm, n_draw = settings.num_warmup, settings.num_samples
+
+    def chain(k):
+        state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
+
+        def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+            s = kernel.sample(s, (), {})
+            return s, (s.z, s.diverging, s.num_steps)
+
+        # one loop for warm-up and draws: the kernel is compiled once, not twice
+        return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+
+    keys = jax.random.split(key, settings.num_chains)
+    x, diverging, steps = jax.jit(lambda keys: jax.lax.map(chain, keys))(keys)
+    steps = np.asarray(steps)
+    x, diverging = x[:, n_warm:], diverging[:, n_warm:]
+    # lax.map, not vmap: XLA's batched Cholesky is slow on CPU
+    draws = jax.jit(lambda x: jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)), x))(
+        x.reshape(-1, x.shape[-1]))
+    chains = {k: np.asarray(v).reshape((settings.num_chains, n_draw) + v.shape[1:])
+              for k, v in draws.items()}
+    sampler = {"mass_matrix_start": "identity" if cov is None else "laplace",
+               "leapfrog_steps_warmup": float(steps[:, :n_warm].mean()) if n_warm else 0.0,
+               "leapfrog_steps_draws": float(steps[:, n_warm:].mean())}
+    return chains, int(np.sum(np.asarray(diverging))), sampler
 
 
 def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
@@ -337,6 +416,9 @@ class PosteriorRun:
         divergences: NUTS divergent transitions (0 for SVI).
         losses: SVI −ELBO per step (empty for NUTS).
         seconds: Wall time of the stage.
+        sampler: NUTS: how the mass matrix started (``"laplace"`` or ``"identity"``)
+            and the mean leapfrog steps per iteration in warm-up and in the draws
+            (the stage's cost, whatever the machine's load); empty for SVI.
     """
 
     method: str
@@ -346,6 +428,7 @@ class PosteriorRun:
     divergences: int = 0
     losses: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seconds: float = 0.0
+    sampler: dict = field(default_factory=dict)
 
     @property
     def samples(self) -> dict:
@@ -367,8 +450,9 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
         what = (f"{settings.num_chains} chains × {settings.num_warmup} + {settings.num_samples} "
                 "steps" if method == "nuts" else f"{settings.svi_steps} steps")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
+    sampler = {}
     if method == "nuts":
-        chains, div = _nuts(kwargs, map_point, settings, k_post, progress)
+        chains, div, sampler = _nuts(kwargs, map_point, settings, k_post, progress)
         losses = np.zeros(0)
     else:
         chains, losses = _svi(kwargs, map_point, settings, k_post, progress)
@@ -376,7 +460,8 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
     pooled = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()}
     theta = {k: v for k, v in pooled.items() if not k.startswith("marginal")}
     betas, gammas = _sample_maps(kwargs["spec"], kwargs, theta, k_map)
-    return PosteriorRun(method, chains, betas, gammas, div, losses, time.perf_counter() - t0)
+    return PosteriorRun(method, chains, betas, gammas, div, losses, time.perf_counter() - t0,
+                        sampler)
 
 
 #: SVI's interval ends may differ from NUTS's by this fraction of NUTS's width.
