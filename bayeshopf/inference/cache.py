@@ -71,10 +71,11 @@ def configure_xla_cpu() -> list[str]:
       in a row took 5–8 s each. The models here are small, so one thread per
       computation costs nothing measurable.
     - :data:`CLASSIC_FUSION` (jaxlib ≥ 0.10 only: older XLA aborts on flags it
-      does not know). With an empty compilation cache, the rig's MAP took 13.4 s
-      against 16.8 s with the fusion emitters, and its NUTS stage 18.3 s against
-      25.7 s; with the programs cached, NUTS ran 7.8 s against 7.5 s
-      (``docs/inference_core.md``).
+      does not know). The fusion emitters cost compile time, not run time: with
+      an empty compilation cache ``bayeshopf fit`` of the rig took 38.8 s
+      without them against 49.7 s with them, ``bayeshopf demo`` 51.9 s against
+      60.2 s; warm, the rig took 22.3 s against 21.8 s
+      (``benchmarks/cli_speed.json``, ``cli_speed_fusion_emitters.json``).
 
     Takes effect only before JAX's first computation in the process (the CLI and
     the test suite call it first).

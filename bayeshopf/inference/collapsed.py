@@ -191,23 +191,18 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     spec = kwargs["spec"]
     init = _initial_values(spec)
     info, unravel = model_functions(kwargs, init)
-    potential = jax.jit(lambda x: info.potential_fn(unravel(x)))
+
+    def potential(x):
+        return info.potential_fn(unravel(x))
+
     names = ("gap_fold", "gap_hopf") if spec.criticality == "subcritical" else ("gap_hopf",
                                                                                   "kappa")
-    best = None
+    grid = []
     for g1, g2 in itertools.product(START_GRID, repeat=2):
         z = dict(info.param_info.z)
         z[names[0]] = jnp.log(g1 * (spec.mu_span if names[0] != "kappa" else 1 / spec.mu_span))
         z[names[1]] = jnp.log(g2 * (spec.mu_span if names[1] != "kappa" else 1 / spec.mu_span))
-        x = ravel_pytree(z)[0]
-        v = float(potential(x))
-        if np.isfinite(v) and (best is None or v < best[0]):
-            best = (v, x)
-    if best is None:
-        raise FitError("no start on the grid of gaps gives a finite log density: are the "
-                       "branch labels right (unstable orbits need a fold below them)?")
-    x = best[1]
-    start = {k: np.asarray(v) for k, v in info.postprocess_fn(unravel(x)).items()}
+        grid.append(ravel_pytree(z)[0])
     opt = optax.lbfgs()
     value_and_grad = optax.value_and_grad_from_state(potential)
 
@@ -223,7 +218,18 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
         updates, state = opt.update(g, state, x, value=v, grad=g, value_fn=potential)
         return optax.apply_updates(x, updates), state
 
-    x, state = jax.jit(lambda x: jax.lax.while_loop(cond, body, (x, opt.init(x))))(x)
+    def solve(grid):      # the grid, its best point and L-BFGS from it: one compiled call
+        values = jax.lax.map(potential, grid)
+        best = jnp.argmin(jnp.where(jnp.isfinite(values), values, jnp.inf))
+        x, state = jax.lax.while_loop(cond, body, (grid[best], opt.init(grid[best])))
+        return (values[best], info.postprocess_fn(unravel(grid[best])), x, state,
+                info.postprocess_fn(unravel(x)))
+
+    start_value, start, x, state, params = jax.jit(solve)(jnp.stack(grid))
+    if not np.isfinite(float(start_value)):
+        raise FitError("no start on the grid of gaps gives a finite log density: are the "
+                       "branch labels right (unstable orbits need a fold below them)?")
+    start = {k: np.asarray(v) for k, v in start.items()}
     n = optax.tree_utils.tree_get(state, "count")
     v = optax.tree_utils.tree_get(state, "value")     # the line search's, at x: not recomputed
     gnorm = float(optax.tree_utils.tree_l2_norm(optax.tree_utils.tree_get(state, "grad")))
@@ -231,7 +237,7 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
         raise FitError("MAP: the log density is not finite at the optimum")
     z = unravel(x)
     return MapPoint(
-        params={k: np.asarray(val) for k, val in info.postprocess_fn(z).items()},
+        params={k: np.asarray(val) for k, val in params.items()},
         unconstrained={k: np.asarray(val) for k, val in z.items()},
         log_joint=-float(v), grad_norm=gnorm, converged=gnorm < MAP_GTOL, n_steps=int(n),
         start=start,
@@ -254,8 +260,10 @@ def model_functions(kwargs: dict, init: dict):
     if (hit is not None and hit[1] == sorted(init) and len(hit[0]) == len(args)
             and all(k == k2 and v is v2 for (k, v), (k2, v2) in zip(hit[0], args, strict=True))):
         return hit[2]
+    # validate_grad=False: no eager gradient of the model (1.2 s on the rig, warm); the
+    # MAP and NUTS compute theirs compiled
     info = initialize_model(jax.random.PRNGKey(0), cm.collapsed_model, model_kwargs=kwargs,
-                            init_strategy=init_to_value(values=init))
+                            init_strategy=init_to_value(values=init), validate_grad=False)
     out = (info, ravel_pytree(info.param_info.z)[1])
     _MODEL_INFO["last"] = (args, sorted(init), out)   # one data set at a time
     return out
@@ -269,17 +277,21 @@ def clear_model_functions() -> None:
     _MODEL_INFO.clear()
 
 
-def laplace_covariance(potential, x) -> np.ndarray | None:
+def laplace_covariance(potential, x):
     """The inverse Hessian of the potential at ``x`` (the Laplace approximation's covariance).
 
-    ``None`` when the Hessian is not positive definite there (a MAP on a ridge or
-    at a boundary), so that NUTS starts from the identity instead.
+    Traceable, so that it compiles with the sampler that uses it.
+
+    Returns:
+        ``(cov, ok)``: ``ok`` is whether the Hessian is positive definite there;
+        where it is not (a MAP on a ridge or at a boundary), ``cov`` is the
+        identity, NUTS's own start.
     """
-    H = np.asarray(jax.jit(jax.hessian(potential))(x))
+    H = jax.hessian(potential)(x)
     H = 0.5 * (H + H.T)
-    if not np.all(np.isfinite(H)) or np.linalg.eigvalsh(H)[0] <= 0:
-        return None
-    return np.linalg.inv(H)
+    ok = jnp.all(jnp.isfinite(H)) & (jnp.linalg.eigvalsh(H)[0] > 0)
+    eye = jnp.eye(x.shape[0])
+    return jnp.where(ok, jnp.linalg.inv(jnp.where(ok, H, eye)), eye), ok
 
 
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
@@ -288,8 +300,8 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     The mass matrix starts at the MAP's Laplace covariance (the inverse Hessian
     of the potential there) and is adapted from it. From the identity, the
     windowed adaptation spends its first windows on deep trees: on the 3-DOF demo
-    39.5 leapfrog steps per warm-up iteration against 15.8 from the Laplace
-    covariance (seed 0, 4 × (500 + 500); ``docs/inference_core.md``).
+    38.0 leapfrog steps per warm-up iteration against 16.0 from the Laplace
+    covariance (seed 0, 4 × (500 + 500); ``benchmarks/nuts_start.json``).
 
     The chains run one after another inside a single ``jit`` (``lax.map`` over
     their keys), warm-up and draws in one ``scan``: one trace and one compilation
@@ -306,33 +318,37 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     def potential(x):
         return info.potential_fn(unravel(x))
 
-    cov = laplace_covariance(potential, x0) if settings.dense_mass else None
-    kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
-                  inverse_mass_matrix=None if cov is None else jnp.asarray(cov),
-                  target_accept_prob=settings.target_accept,
-                  max_tree_depth=settings.max_tree_depth)
     n_warm, n_draw = settings.num_warmup, settings.num_samples
 
-    def chain(k):
-        state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
+    def run(keys):
+        cov, ok = laplace_covariance(potential, x0) if settings.dense_mass else (None, False)
+        kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
+                      inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
+                      max_tree_depth=settings.max_tree_depth)
 
-        def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
-            s = kernel.sample(s, (), {})
-            return s, (s.z, s.diverging, s.num_steps)
+        def chain(k):
+            state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
 
-        # one loop for warm-up and draws: the kernel is compiled once, not twice
-        return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+            def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+                s = kernel.sample(s, (), {})
+                return s, (s.z, s.diverging, s.num_steps)
+
+            # one loop for warm-up and draws: the kernel is compiled once, not twice
+            return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+
+        x, diverging, steps = jax.lax.map(chain, keys)
+        # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
+        # vmap: XLA's batched Cholesky is slow on CPU
+        draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
+                            x[:, n_warm:].reshape(-1, x.shape[-1]))
+        return draws, diverging[:, n_warm:], steps, ok
 
     keys = jax.random.split(key, settings.num_chains)
-    x, diverging, steps = jax.jit(lambda keys: jax.lax.map(chain, keys))(keys)
+    draws, diverging, steps, laplace = jax.jit(run)(keys)
     steps = np.asarray(steps)
-    x, diverging = x[:, n_warm:], diverging[:, n_warm:]
-    # lax.map, not vmap: XLA's batched Cholesky is slow on CPU
-    draws = jax.jit(lambda x: jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)), x))(
-        x.reshape(-1, x.shape[-1]))
     chains = {k: np.asarray(v).reshape((settings.num_chains, n_draw) + v.shape[1:])
               for k, v in draws.items()}
-    sampler = {"mass_matrix_start": "identity" if cov is None else "laplace",
+    sampler = {"mass_matrix_start": "laplace" if bool(laplace) else "identity",
                "leapfrog_steps_warmup": float(steps[:, :n_warm].mean()) if n_warm else 0.0,
                "leapfrog_steps_draws": float(steps[:, n_warm:].mean())}
     return chains, int(np.sum(np.asarray(diverging))), sampler
