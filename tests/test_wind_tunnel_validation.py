@@ -35,10 +35,12 @@ def loo(recordings):
 
 @pytest.mark.slow
 def test_held_out_stable_orbits_are_covered_and_the_unstable_ones_are_not(loo):
-    """benchmarks/loo_collapsed_curved.json (seed 0, defaults): 4/7, every stable one inside.
+    """benchmarks/loo_collapsed_curved.json (seed 0, defaults): 4/7 or 5/7, every stable one inside.
 
-    The three unstable recordings are missed (P(X ≤ 4) = 0.026 for calibrated
-    90% bands): without one of them the fold and the Hopf point move.
+    The unstable 14.9 and 16.5 m/s recordings are missed, and the unstable 15.7
+    m/s one lies on its band's upper end (inside in one run, outside in another;
+    P(X ≤ 4) = 0.026 for calibrated 90% bands): without one of them the fold
+    and the Hopf point move.
     """
     inside = {f.name: f.inside("bayes") for f in loo.folds}
     assert all(v for k, v in inside.items() if "_stable_" in k), inside
@@ -50,7 +52,7 @@ def test_held_out_stable_orbits_are_covered_and_the_unstable_ones_are_not(loo):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="held-out unstable LCOs fall outside their bands "
-                   "(benchmarks/loo_collapsed_curved.json: 4/7)")
+                   "(benchmarks/loo_collapsed_curved.json: 4/7 or 5/7)")
 def test_held_out_coverage_reaches_six_of_seven(loo):
     assert loo.coverage("bayes") >= 6
 
