@@ -24,13 +24,10 @@ RIG = HERE.parent.parent / "shared/data/flutter_cbc"
 EXE = str(Path(sys.executable).with_name("bayeshopf"))
 
 
-XLA_FLAGS = os.environ.get("XLA_FLAGS", "")
-
-
-def timed(args, cache):
+def timed(args, cache, xla_flags):
     out = Path(tempfile.mkdtemp()) / "fit"
     env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(cache), "MPLBACKEND": "Agg",
-           "XLA_FLAGS": XLA_FLAGS}
+           "XLA_FLAGS": xla_flags}
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
     subprocess.run([EXE, *args, "--out", str(out), "--quiet"], env=env, check=True,
@@ -41,15 +38,19 @@ def timed(args, cache):
             "stages_s": summary.get("timings_s", {})}
 
 
-def main(repeat=1, name="cli_speed"):
+def main(repeat=1, fusion_emitters=False):
+    flags = os.environ.get("XLA_FLAGS", "")
+    if fusion_emitters:
+        flags = f"{flags} --xla_cpu_use_fusion_emitters=true".strip()
     rows = []
     for _ in range(repeat):
         cache = Path(tempfile.mkdtemp())
-        rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache)})
-        rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache)})
-        rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()))})
+        rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache, flags)})
+        rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache, flags)})
+        rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()), flags)})
+    name = "cli_speed_fusion_emitters" if fusion_emitters else "cli_speed"
     (HERE / f"{name}.json").write_text(json.dumps(
-        {"cpu_count": os.cpu_count(), "xla_flags": XLA_FLAGS, "runs": rows}, indent=1))
+        {"cpu_count": os.cpu_count(), "xla_flags": flags, "runs": rows}, indent=1))
     print("| case | wall (s) | load before | stages (s) |\n|---|---:|---:|---|")
     for r in rows:
         st = ", ".join(f"{k} {v:.1f}" for k, v in r["stages_s"].items())
@@ -57,7 +58,5 @@ def main(repeat=1, name="cli_speed"):
 
 
 if __name__ == "__main__":
-    if "--fusion-emitters" in sys.argv:
-        XLA_FLAGS = f"{XLA_FLAGS} --xla_cpu_use_fusion_emitters=true".strip()
     main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
-         "cli_speed_fusion_emitters" if "--fusion-emitters" in sys.argv else "cli_speed")
+         fusion_emitters="--fusion-emitters" in sys.argv)
