@@ -37,7 +37,7 @@ from bayeshopf.features.harmonics import (
     time_design,
 )
 from bayeshopf.inference import collapsed as ci
-from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
+from bayeshopf.inference.cache import compiled_call, enable_compilation_cache, release_compiled
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
@@ -493,14 +493,16 @@ def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
 
 
 _ORBIT_FNS: dict[int, tuple] = {}
+_FREQUENCY_FNS: dict[int, tuple] = {}
 
 
 def clear_orbit_jits() -> None:
-    """Forget the compiled orbit functions of every spec.
+    """Forget the compiled orbit and frequency functions of every spec.
 
     Called by :func:`~bayeshopf.inference.cache.release_compiled`.
     """
     _ORBIT_FNS.clear()
+    _FREQUENCY_FNS.clear()
 
 
 def _orbit_fn(spec: cm.CollapsedSpec):
@@ -521,6 +523,28 @@ def _orbit_fn(spec: cm.CollapsedSpec):
     if len(_ORBIT_FNS) > 16:
         _ORBIT_FNS.clear()
     _ORBIT_FNS[id(spec)] = (spec, fn)
+    return fn
+
+
+def _frequency_fn(spec: cm.CollapsedSpec):
+    """The jitted ``(θ, γ, μ, sign) ↦ Ω`` (rad/s, ``(n, n_mu)``), compiled once per spec.
+
+    Run op by op, the curve's few dozen operations cost about 0.1 s a call in a
+    fresh process (each operation loaded from the compilation cache), and the
+    CLI calls it some twenty times.
+    """
+    hit = _FREQUENCY_FNS.get(id(spec))
+    if hit is not None and hit[0] is spec:
+        return hit[1]
+
+    def fn(th, gammas, mu, sign):
+        th = {k: v[:, None] for k, v in th.items()}
+        return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
+
+    fn = jax.jit(fn)
+    if len(_FREQUENCY_FNS) > 16:
+        _FREQUENCY_FNS.clear()
+    _FREQUENCY_FNS[id(spec)] = (spec, fn)
     return fn
 
 
@@ -556,8 +580,8 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     """
     ensure_x64()
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    th = {k: np.asarray(v)[:, None] for k, v in theta.items() if np.ndim(v) == 1}
-    om = np.asarray(cm.frequency(spec, th, np.asarray(gammas)[:, None, :], mu, float(sign)))
+    th = {k: jnp.asarray(v) for k, v in theta.items() if np.ndim(v) == 1}
+    om = np.asarray(_frequency_fn(spec)(th, jnp.asarray(gammas), jnp.asarray(mu), float(sign)))
     if predictive:
         sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
         om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))
@@ -755,7 +779,8 @@ def log_likelihood_draws(spec: cm.CollapsedSpec, theta: dict,
         return cm.pointwise_log_likelihood(spec, t, kw["mu"], kw["sign"], kw["coeffs"],
                                            kw["coeffs_se"], kw["omega"], kw["omega_se"])
 
-    return np.asarray(jax.jit(lambda th: jax.lax.map(one, th))(th))
+    return np.asarray(compiled_call("loglik", lambda: lambda th: jax.lax.map(one, th), (th,),
+                                    key=ci.model_key(kw)))
 
 
 def _features(recordings: RecordingSet | HarmonicFeatures, settings: ci.CollapsedSettings

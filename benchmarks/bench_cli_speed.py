@@ -1,14 +1,17 @@
 """Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
 
-Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters]`` on an
-otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
+Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters] [--label L]``
+on an otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
 (``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
 cache the cold run filled. Prints a Markdown table and writes
 ``benchmarks/cli_speed.json`` with the stage timings from each ``summary.json``
 and the machine's CPU count and load before each run. ``--fusion-emitters`` runs
 with XLA's CPU fusion emitters, which ``inference.cache.configure_xla_cpu`` turns
 off by default (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true``), and writes
-``benchmarks/cli_speed_fusion_emitters.json``.
+``benchmarks/cli_speed_fusion_emitters.json``. ``--label L`` writes
+``benchmarks/cli_speed_L.json`` instead: with ``PYTHONPATH`` naming a checkout of
+another commit (``git worktree add``), the CLI runs that commit's code, so two
+versions can be timed in turns on the same machine.
 """
 
 import json
@@ -38,7 +41,7 @@ def timed(args, cache, xla_flags):
             "stages_s": summary.get("timings_s", {})}
 
 
-def main(repeat=1, fusion_emitters=False):
+def main(repeat=1, fusion_emitters=False, label=None):
     flags = os.environ.get("XLA_FLAGS", "")
     if fusion_emitters:
         flags = f"{flags} --xla_cpu_use_fusion_emitters=true".strip()
@@ -49,8 +52,10 @@ def main(repeat=1, fusion_emitters=False):
         rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache, flags)})
         rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()), flags)})
     name = "cli_speed_fusion_emitters" if fusion_emitters else "cli_speed"
+    name = f"cli_speed_{label}" if label else name
+    code = os.environ.get("PYTHONPATH") or str(HERE.parent)
     (HERE / f"{name}.json").write_text(json.dumps(
-        {"cpu_count": os.cpu_count(), "xla_flags": flags, "runs": rows}, indent=1))
+        {"cpu_count": os.cpu_count(), "xla_flags": flags, "code": code, "runs": rows}, indent=1))
     print("| case | wall (s) | load before | stages (s) |\n|---|---:|---:|---|")
     for r in rows:
         st = ", ".join(f"{k} {v:.1f}" for k, v in r["stages_s"].items())
@@ -59,4 +64,5 @@ def main(repeat=1, fusion_emitters=False):
 
 if __name__ == "__main__":
     main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
-         fusion_emitters="--fusion-emitters" in sys.argv)
+         fusion_emitters="--fusion-emitters" in sys.argv,
+         label=sys.argv[sys.argv.index("--label") + 1] if "--label" in sys.argv else None)

@@ -15,6 +15,7 @@ REPO = Path(__file__).parents[1]
 USED_WITHOUT_IMPORT = {
     "jaxlib": "jax's compiled backend",
     "h5netcdf": "the engine ArviZ/xarray write and read posterior.nc with",
+    "flatbuffers": "jax.export's serialization (inference.cache.compiled_call)",
 }
 
 

@@ -1,6 +1,9 @@
-"""The sampler's setup: XLA's CPU flags and the Laplace start of NUTS's mass matrix."""
+"""The sampler's setup: XLA's CPU flags, the stored compiled programs, the Laplace start of
+NUTS's mass matrix and the imports done beside it."""
 
 import os
+import subprocess
+import sys
 
 import jax.numpy as jnp
 import numpy as np
@@ -69,3 +72,77 @@ def test_model_functions_are_reused_only_for_the_same_arguments():
     assert ci.model_functions(ci.model_arguments(spec, f))[0] is not info_moved
     ci.clear_model_functions()
     assert ci.model_functions(moved)[0] is not info_moved
+
+
+def _stored_counting(monkeypatch, folder):
+    """``compiled_call`` with the cache in ``folder``, and a counter of ``make`` calls."""
+    monkeypatch.setattr(cache, "_ENABLED", [str(folder)] if folder else [])
+    made = []
+
+    def call(scale, x):
+        def make():
+            made.append(scale)
+            return lambda x: jnp.sin(scale * x).sum() + jnp.linalg.cholesky(
+                jnp.eye(2) * scale)[0, 0]
+        return float(cache.compiled_call("probe", make, (x,), key=(scale, np.ones(2))))
+
+    return call, made
+
+
+def test_compiled_call_traces_once_per_key_and_gives_the_jit_result(monkeypatch, tmp_path):
+    call, made = _stored_counting(monkeypatch, tmp_path)
+    x = jnp.linspace(0.0, 1.0, 5)
+    expected = float(jnp.sin(2.0 * x).sum() + jnp.sqrt(2.0))
+    assert call(2.0, x) == expected
+    assert call(2.0, x) == expected        # read back from the stored file
+    assert made == [2.0]
+    assert len(list(tmp_path.glob(f"{cache.STORED_PREFIX}probe-*.bin"))) == 1
+    assert call(3.0, x) == float(jnp.sin(3.0 * x).sum() + jnp.sqrt(3.0))   # a new key
+    assert call(2.0, x + 1.0) == float(jnp.sin(2.0 * (x + 1.0)).sum() + jnp.sqrt(2.0))
+    assert made == [2.0, 3.0, 2.0]         # a new argument value is a new key too
+
+
+def test_compiled_call_replaces_a_damaged_file_and_runs_without_a_cache(monkeypatch, tmp_path):
+    call, made = _stored_counting(monkeypatch, tmp_path)
+    x = jnp.arange(3.0)
+    first = call(2.0, x)
+    (f,) = tmp_path.glob(f"{cache.STORED_PREFIX}probe-*.bin")
+    f.write_bytes(b"not a serialized program")
+    assert call(2.0, x) == first and made == [2.0, 2.0]
+    assert f.read_bytes() != b"not a serialized program"
+    call, made = _stored_counting(monkeypatch, None)
+    assert call(2.0, x) == first and call(2.0, x) == first and made == [2.0, 2.0]
+
+
+_TWO_PROCESSES = """
+import sys
+from bayeshopf._x64 import ensure_x64
+ensure_x64()
+import jax.numpy as jnp
+from bayeshopf.inference import cache
+cache.enable_compilation_cache(sys.argv[1])
+made = []
+def make():
+    made.append(1)
+    return lambda x: jnp.linalg.cholesky(jnp.eye(2) * x.sum())[0, 0] + jnp.linalg.eigh(
+        jnp.diag(x[:2]))[0][0]
+print(float(cache.compiled_call("probe2", make, (jnp.arange(1.0, 4.0),), key=0)), len(made))
+"""
+
+
+def test_a_program_stored_by_one_process_runs_in_the_next(tmp_path):
+    """Loaded in a fresh process, LAPACK kernels included (Cholesky, eigh), without tracing."""
+    run = [sys.executable, "-c", _TWO_PROCESSES, str(tmp_path)]
+    first = subprocess.run(run, capture_output=True, text=True, check=True).stdout.split()
+    second = subprocess.run(run, capture_output=True, text=True, check=True).stdout.split()
+    assert first[1] == "1" and second[1] == "0"      # traced once, then loaded
+    assert float(first[0]) == float(second[0]) == np.sqrt(6.0) + 1.0
+
+
+def test_arviz_and_matplotlib_are_not_imported_with_the_inference_core():
+    """They are imported beside NUTS (bayeshopf._preload), not before the fit starts."""
+    code = ("import sys, bayeshopf.posterior, bayeshopf.report, bayeshopf.cli.main; "
+            "print(sorted(m for m in ('arviz', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"

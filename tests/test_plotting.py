@@ -246,6 +246,21 @@ def test_plot_all(fitted, tmp_path) -> None:
     assert sorted(os.listdir(out)) == sorted(names)  # no temporary files
 
 
+def test_plot_all_with_a_figure_process_writes_the_same_files(fitted, tmp_path) -> None:
+    """The figures drawn in the spawned worker are byte for byte those drawn here."""
+    from bayeshopf.plotting import figure_worker
+
+    here = plot_all(fitted["fit"], fitted["rs"], tmp_path / "here", truth=fitted["truth"],
+                    dpi=60)
+    with figure_worker() as ex:
+        there = plot_all(fitted["fit"], fitted["rs"], tmp_path / "there",
+                         truth=fitted["truth"], dpi=60, executor=ex)
+    assert [p.name for p in there] == [p.name for p in here]
+    for a, b in zip(here, there, strict=True):
+        assert a.read_bytes() == b.read_bytes(), a.name
+    assert sorted(os.listdir(tmp_path / "there")) == sorted(p.name for p in here)
+
+
 def test_plotting_is_pure(fitted, tmp_path) -> None:
     f, rs, truth = fitted["fit"], fitted["rs"], fitted["truth"]
     d, ppc = fitted["diagram"], fitted["ppc"]

@@ -240,13 +240,12 @@ def _print_nuts_check(summary: dict) -> None:
 
 
 def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
-    """``fit``/``demo``: :func:`~bayeshopf.posterior.fit_hybrid` (or ``fit_auto``), saved."""
-    from dataclasses import replace
+    """``fit``/``demo``: :func:`~bayeshopf.posterior.fit_hybrid` (or ``fit_auto``), saved.
 
+    The figures' process starts first, so that it imports Matplotlib while the fit runs.
+    """
     from bayeshopf import report
     from bayeshopf.errors import FitError
-    from bayeshopf.inference.collapsed import CollapsedSettings
-    from bayeshopf.posterior import fit_hybrid
 
     if getattr(args, "nuts_check", False) and args.inference != "svi":
         raise FitError("--nuts-check compares SVI with NUTS and needs --inference svi; got "
@@ -255,6 +254,26 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
         raise FitError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected "
                        "(e.g. 0.9)")
     report.check_output_folder(out, args.force)
+    worker = None
+    if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process
+        from bayeshopf import _preload
+
+        _preload.request("bayeshopf.plotting")
+        worker = _preload.figure_worker()
+    try:
+        return _fit_and_save(rs, criticality, args, out, truth, extra, worker)
+    finally:
+        if worker is not None:
+            worker.shutdown(cancel_futures=True)
+
+
+def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
+    from dataclasses import replace
+
+    from bayeshopf import report
+    from bayeshopf.inference.collapsed import CollapsedSettings
+    from bayeshopf.posterior import fit_hybrid
+
     progress = not args.quiet
     if progress:
         print(f"features: {len(rs)} recordings ({int(rs.is_unstable.sum())} unstable), "
@@ -284,7 +303,8 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
         from bayeshopf.plotting import plot_all
 
         def figures(folder):
-            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None, ci=args.ci)
+            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None, ci=args.ci,
+                            executor=worker)
 
     report.save_hybrid(post, out, force=args.force, figures=figures, ppc=ppc,
                        extra_summary=extra, ci=args.ci)

@@ -7,6 +7,10 @@ stats move to ``arviz_stats``). Every ArviZ call of the package goes through
 this module, so a move to 1.x changes this file only; the saved
 ``posterior.nc`` has one netCDF group per InferenceData group, which
 ``xarray.open_datatree`` opens as well.
+
+ArviZ is imported on first use (:func:`arviz`), not with this module: its
+import takes about 3 s, which the CLI spends in a background thread while the
+sampler runs (:func:`bayeshopf.cli.main.preload`).
 """
 
 from __future__ import annotations
@@ -15,12 +19,20 @@ import os
 import tempfile
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-with warnings.catch_warnings():  # the 0.2x series announces its 1.x refactor on import
-    warnings.simplefilter("ignore", FutureWarning)
+if TYPE_CHECKING:
     import arviz as az
+
+
+def arviz():
+    """The ``arviz`` module, imported on first use."""
+    with warnings.catch_warnings():  # the 0.2x series announces its 1.x refactor on import
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz as az
+    return az
 
 
 def write_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:
@@ -43,7 +55,7 @@ def read_posterior(path: str | os.PathLike[str]) -> tuple[dict, dict]:
     Returns:
         ``(samples, attrs)``: site name -> array ``(n_chains · n_draws, ...)``.
     """
-    idata = az.from_netcdf(str(path))
+    idata = arviz().from_netcdf(str(path))
     post = idata.posterior
     samples = {}
     for k, v in post.data_vars.items():
@@ -54,40 +66,45 @@ def read_posterior(path: str | os.PathLike[str]) -> tuple[dict, dict]:
 
 def _log_lik_idata(ll) -> az.InferenceData:
     ll = np.asarray(ll)
-    return az.from_dict(posterior={"_": np.zeros((1, ll.shape[0]))},
-                        log_likelihood={"obs": ll[None]})
+    return arviz().from_dict(posterior={"_": np.zeros((1, ll.shape[0]))},
+                             log_likelihood={"obs": ll[None]})
 
 
-class _Refits(az.SamplingWrapper):
-    """ArviZ's sampling wrapper over a callback ``i ↦ log p(y_i | θ_s^(−i))``.
+def _refits(idata, held_out_log_lik):
+    """ArviZ's sampling wrapper over a callback (built on first use, as ArviZ is imported)."""
 
-    ``reloo`` asks the wrapper to drop observation i, refit and evaluate the
-    held-out log-likelihood; here one callback does all three.
-    """
+    class _Refits(arviz().SamplingWrapper):
+        """ArviZ's sampling wrapper over a callback ``i ↦ log p(y_i | θ_s^(−i))``.
 
-    def __init__(self, idata, held_out_log_lik):
-        super().__init__(model=None, idata_orig=idata)
-        self._held_out = held_out_log_lik
+        ``reloo`` asks the wrapper to drop observation i, refit and evaluate the
+        held-out log-likelihood; here one callback does all three.
+        """
 
-    def check_implemented_methods(self, methods):
-        # ArviZ checks by calling every method with a dummy argument, which here
-        # would run a refit; all four are implemented
-        return []
+        def __init__(self, idata, held_out_log_lik):
+            super().__init__(model=None, idata_orig=idata)
+            self._held_out = held_out_log_lik
 
-    def sel_observations(self, idx):
-        i = int(np.ravel(idx)[0])
-        return i, i
+        def check_implemented_methods(self, methods):
+            # ArviZ checks by calling every method with a dummy argument, which here
+            # would run a refit; all four are implemented
+            return []
 
-    def sample(self, modified_observed_data):
-        return modified_observed_data
+        def sel_observations(self, idx):
+            i = int(np.ravel(idx)[0])
+            return i, i
 
-    def get_inference_data(self, fitted):
-        return fitted
+        def sample(self, modified_observed_data):
+            return modified_observed_data
 
-    def log_likelihood__i(self, excluded_obs, idata__i):
-        import xarray as xr
+        def get_inference_data(self, fitted):
+            return fitted
 
-        return xr.DataArray(np.asarray(self._held_out(int(excluded_obs)), dtype=float))
+        def log_likelihood__i(self, excluded_obs, idata__i):
+            import xarray as xr
+
+            return xr.DataArray(np.asarray(self._held_out(int(excluded_obs)), dtype=float))
+
+    return _Refits(idata, held_out_log_lik)
 
 
 def _elpd(log_lik, held_out_log_lik=None, k_thresh: float = 0.7):
@@ -98,14 +115,14 @@ def _elpd(log_lik, held_out_log_lik=None, k_thresh: float = 0.7):
     idata = _log_lik_idata(log_lik)
     with warnings.catch_warnings():  # large Pareto k is reported by the callers
         warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
-        res = az.loo(idata, pointwise=True)
+        res = arviz().loo(idata, pointwise=True)
         # a copy: reloo zeroes the k of the refitted observations in place
         pareto_k = np.array(res["pareto_k"], dtype=float)
         if held_out_log_lik is None:
             return res, pareto_k, []
         refitted = [int(i) for i in np.flatnonzero(pareto_k > k_thresh)]
         warnings.filterwarnings("ignore", message="reloo is an experimental")
-        return az.reloo(_Refits(idata, held_out_log_lik), res, k_thresh=k_thresh,
+        return arviz().reloo(_refits(idata, held_out_log_lik), res, k_thresh=k_thresh,
                         verbose=False), pareto_k, refitted
 
 
@@ -155,7 +172,7 @@ def compare_with_loo(log_liks: dict, held_out: dict | None = None,
     """
     held_out = held_out or {}
     elpds = {name: _elpd(ll, held_out.get(name), k_thresh) for name, ll in log_liks.items()}
-    table = az.compare({name: e[0] for name, e in elpds.items()}, ic="loo")
+    table = arviz().compare({name: e[0] for name, e in elpds.items()}, ic="loo")
     rows = {
         str(name): {
             "rank": int(row["rank"]),
@@ -177,6 +194,7 @@ def compare(log_liks: dict) -> dict:
 
 def rhat_ess(chains: dict) -> dict:
     """R̂ and bulk ESS per site from draws by chain ``(n_chains, n_draws)`` (scalar sites)."""
+    az = arviz()
     ds = az.convert_to_dataset({k: np.asarray(v) for k, v in chains.items()})
     rhat, ess = az.rhat(ds), az.ess(ds, method="bulk")
     return {k: (float(rhat[k]), float(ess[k])) for k in chains}
@@ -203,7 +221,7 @@ def chains_to_inference_data(posterior: dict, *, observed: dict | None = None,
 
     with warnings.catch_warnings():  # 0.2x announces its 1.x refactor
         warnings.simplefilter("ignore", FutureWarning)
-        idata = az.from_dict(
+        idata = arviz().from_dict(
             posterior=arrays(posterior), log_likelihood=arrays(log_likelihood),
             posterior_predictive=arrays(posterior_predictive),
             sample_stats=arrays(sample_stats), observed_data=arrays(observed),
@@ -220,4 +238,4 @@ def read_inference_data(path: str | os.PathLike[str]) -> az.InferenceData:
     """The InferenceData of a netCDF file (all groups loaded into memory, file closed)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
-        return az.from_netcdf(str(path))
+        return arviz().from_netcdf(str(path))

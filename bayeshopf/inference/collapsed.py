@@ -23,6 +23,7 @@ over a handful of parameters: the normal form's gaps (and the unfolding's ``w``)
 from __future__ import annotations
 
 import itertools
+import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -36,10 +37,12 @@ from numpyro.infer import NUTS, SVI, Predictive, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
 
+from bayeshopf import _preload
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
+from bayeshopf.inference.cache import compiled_call
 from bayeshopf.model import collapsed as cm
 
 #: Gradient norm (unconstrained space) below which the MAP counts as converged.
@@ -140,6 +143,16 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
     )
 
 
+def model_key(kwargs: dict) -> tuple:
+    """What a traced function of the model closes over: the spec and the data arrays.
+
+    The ``key`` of :func:`~bayeshopf.inference.cache.compiled_call` for the functions
+    of :func:`model_functions` and the model's blocks.
+    """
+    return (json.dumps(kwargs["spec"].to_dict(), sort_keys=True),
+            {k: np.asarray(v) for k, v in kwargs.items() if k != "spec"})
+
+
 def model_arguments(spec: cm.CollapsedSpec, features: HarmonicFeatures) -> dict:
     """Keyword arguments of :func:`~bayeshopf.model.collapsed.collapsed_model`."""
     return dict(spec=spec, mu=jnp.asarray(features.mu),
@@ -191,52 +204,64 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     """Deterministic start (grid over the gaps), then L-BFGS to the MAP (module docstring)."""
     ensure_x64()
     spec = kwargs["spec"]
-    info, unravel, potential = model_functions(kwargs)
     names = ("gap_fold", "gap_hopf") if spec.criticality == "subcritical" else ("gap_hopf",
                                                                                   "kappa")
-    grid = []
-    for g1, g2 in itertools.product(START_GRID, repeat=2):
-        z = dict(info.param_info.z)
-        z[names[0]] = jnp.log(g1 * (spec.mu_span if names[0] != "kappa" else 1 / spec.mu_span))
-        z[names[1]] = jnp.log(g2 * (spec.mu_span if names[1] != "kappa" else 1 / spec.mu_span))
-        grid.append(ravel_pytree(z)[0])
-    opt = optax.lbfgs()
-    value_and_grad = optax.value_and_grad_from_state(potential)
+    scale = [1 / spec.mu_span if n == "kappa" else spec.mu_span for n in names]
+    gaps = jnp.log(jnp.array([[g1 * scale[0], g2 * scale[1]]
+                              for g1, g2 in itertools.product(START_GRID, repeat=2)]))
 
-    def cond(carry):      # optax's own recipe: the gradient the line search left at x
-        _, state = carry
-        i = optax.tree_utils.tree_get(state, "count")
-        g = optax.tree_utils.tree_get(state, "grad")
-        return (i == 0) | ((i < max_steps) & (optax.tree_utils.tree_l2_norm(g) >= MAP_GTOL))
+    def make():
+        info, unravel, potential = model_functions(kwargs)
 
-    def body(carry):
-        x, state = carry
-        v, g = value_and_grad(x, state=state)
-        updates, state = opt.update(g, state, x, value=v, grad=g, value_fn=potential)
-        return optax.apply_updates(x, updates), state
+        def start(g):      # the deterministic start with the two gaps set (unconstrained)
+            z = dict(info.param_info.z)
+            z[names[0]], z[names[1]] = g[0], g[1]
+            return ravel_pytree(z)[0]
 
-    def solve(grid):      # the grid, its best point and L-BFGS from it: one compiled call
-        values = jax.lax.map(potential, grid)
-        best = jnp.argmin(jnp.where(jnp.isfinite(values), values, jnp.inf))
-        x, state = jax.lax.while_loop(cond, body, (grid[best], opt.init(grid[best])))
-        return (values[best], info.postprocess_fn(unravel(grid[best])), x, state,
-                info.postprocess_fn(unravel(x)))
+        opt = optax.lbfgs()
+        value_and_grad = optax.value_and_grad_from_state(potential)
 
-    start_value, start, x, state, params = jax.jit(solve)(jnp.stack(grid))
-    if not np.isfinite(float(start_value)):
+        def cond(carry):      # optax's own recipe: the gradient the line search left at x
+            _, state = carry
+            i = optax.tree_utils.tree_get(state, "count")
+            g = optax.tree_utils.tree_get(state, "grad")
+            return (i == 0) | ((i < max_steps) & (optax.tree_utils.tree_l2_norm(g) >= MAP_GTOL))
+
+        def body(carry):
+            x, state = carry
+            v, g = value_and_grad(x, state=state)
+            updates, state = opt.update(g, state, x, value=v, grad=g, value_fn=potential)
+            return optax.apply_updates(x, updates), state
+
+        def solve(gaps):  # the grid, its best point and L-BFGS from it: one compiled call
+            grid = jax.vmap(start)(gaps)
+            values = jax.lax.map(potential, grid)
+            best = jnp.argmin(jnp.where(jnp.isfinite(values), values, jnp.inf))
+            x, state = jax.lax.while_loop(cond, body, (grid[best], opt.init(grid[best])))
+            tree_get = optax.tree_utils.tree_get
+            return {"start_value": values[best],
+                    "start": info.postprocess_fn(unravel(grid[best])),
+                    "unconstrained": unravel(x), "params": info.postprocess_fn(unravel(x)),
+                    "steps": tree_get(state, "count"),
+                    "value": tree_get(state, "value"),  # the line search's, at x
+                    "grad_norm": optax.tree_utils.tree_l2_norm(tree_get(state, "grad"))}
+
+        return solve
+
+    # compiled once per data set and settings, then loaded (inference.cache.compiled_call)
+    out = compiled_call("map", make, (gaps,), key=(model_key(kwargs), max_steps))
+    if not np.isfinite(float(out["start_value"])):
         raise FitError("no start on the grid of gaps gives a finite log density: are the "
                        "branch labels right (unstable orbits need a fold below them)?")
-    start = {k: np.asarray(v) for k, v in start.items()}
-    n = optax.tree_utils.tree_get(state, "count")
-    v = optax.tree_utils.tree_get(state, "value")     # the line search's, at x: not recomputed
-    gnorm = float(optax.tree_utils.tree_l2_norm(optax.tree_utils.tree_get(state, "grad")))
-    if not np.isfinite(float(v)):
+    start = {k: np.asarray(v) for k, v in out["start"].items()}
+    v, gnorm = float(out["value"]), float(out["grad_norm"])
+    if not np.isfinite(v):
         raise FitError("MAP: the log density is not finite at the optimum")
-    z = unravel(x)
     return MapPoint(
-        params={k: np.asarray(val) for k, val in params.items()},
-        unconstrained={k: np.asarray(val) for k, val in z.items()},
-        log_joint=-float(v), grad_norm=gnorm, converged=gnorm < MAP_GTOL, n_steps=int(n),
+        params={k: np.asarray(val) for k, val in out["params"].items()},
+        unconstrained={k: np.asarray(val) for k, val in out["unconstrained"].items()},
+        log_joint=-v, grad_norm=gnorm, converged=gnorm < MAP_GTOL,
+        n_steps=int(out["steps"]),
         start=start,
     )
 
@@ -317,35 +342,44 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     CPU device per chain (pmap) took 31 s on the rig's 2 cores against 13 s
     sequential.
     """
-    info, unravel, potential = model_functions(kwargs)
     x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
     n_warm, n_draw = settings.num_warmup, settings.num_samples
 
-    def run(keys):
-        cov, ok = laplace_covariance(potential, x0) if settings.dense_mass else (None, False)
-        kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
-                      inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
-                      max_tree_depth=settings.max_tree_depth)
+    def make():
+        info, unravel, potential = model_functions(kwargs)
 
-        def chain(k):
-            state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
+        def run(keys):
+            cov, ok = (laplace_covariance(potential, x0) if settings.dense_mass
+                       else (None, False))
+            kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
+                          inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
+                          max_tree_depth=settings.max_tree_depth)
 
-            def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
-                s = kernel.sample(s, (), {})
-                return s, (s.z, s.diverging, s.num_steps)
+            def chain(k):
+                state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
 
-            # one loop for warm-up and draws: the kernel is compiled once, not twice
-            return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+                    s = kernel.sample(s, (), {})
+                    return s, (s.z, s.diverging, s.num_steps)
 
-        x, diverging, steps = jax.lax.map(chain, keys)
-        # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
-        # vmap: XLA's batched Cholesky is slow on CPU
-        draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
-                            x[:, n_warm:].reshape(-1, x.shape[-1]))
-        return draws, diverging[:, n_warm:], steps, ok
+                # one loop for warm-up and draws: the kernel is compiled once, not twice
+                return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+
+            x, diverging, steps = jax.lax.map(chain, keys)
+            # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
+            # vmap: XLA's batched Cholesky is slow on CPU
+            draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
+                                x[:, n_warm:].reshape(-1, x.shape[-1]))
+            return draws, diverging[:, n_warm:], steps, ok
+
+        return run
 
     keys = jax.random.split(key, settings.num_chains)
-    draws, diverging, steps, laplace = jax.jit(run)(keys)
+    _preload.start()   # ArviZ (for R̂ and ESS next) imports while the chains run
+    # compiled once per data set, MAP point and settings, then loaded (inference.cache)
+    draws, diverging, steps, laplace = compiled_call(
+        "nuts", make, (keys,), key=(model_key(kwargs), x0, n_warm, n_draw, settings.dense_mass,
+                                    settings.target_accept, settings.max_tree_depth))
     steps = np.asarray(steps)
     chains = {k: np.asarray(v).reshape((settings.num_chains, n_draw) + v.shape[1:])
               for k, v in draws.items()}
@@ -405,7 +439,8 @@ def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray
                                        kwargs["omega_se"], k_freq)
 
     # lax.map, not vmap: XLA's batched triangular solves hang on CPU
-    betas, gammas = jax.jit(lambda th, keys: jax.lax.map(one, (th, keys)))(th, keys)
+    betas, gammas = compiled_call("maps", lambda: lambda th, keys: jax.lax.map(one, (th, keys)),
+                                  (th, keys), key=model_key(kwargs))
     return np.asarray(betas), np.asarray(gammas) if with_freq else None
 
 

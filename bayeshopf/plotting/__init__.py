@@ -20,10 +20,12 @@ time series are drawn about each recording's mean (``offsets="remove"``);
 from __future__ import annotations
 
 import os
+from concurrent.futures import Executor
 from pathlib import Path
 
 import numpy as np
 
+from bayeshopf._preload import figure_worker
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.plotting._io import save_figure
 from bayeshopf.plotting._units import readable_length
@@ -37,6 +39,7 @@ __all__ = [
     "coefficient_labels",
     "default_zoom",
     "diagram_grid",
+    "figure_worker",
     "plot_all",
     "plot_bifurcation",
     "plot_frequency",
@@ -107,6 +110,7 @@ def plot_all(
     length_unit: str | None = "auto",
     angle_unit: str | None = None,
     offsets: str = "remove",
+    executor: Executor | None = None,
 ) -> list[Path]:
     """Draw and save the standard figures of a fit.
 
@@ -138,6 +142,12 @@ def plot_all(
         angle_unit: Unit of angles (``"deg"``, …), ``None`` for the fit's own.
         offsets: ``"remove"`` or ``"keep"`` each recording's mean in the phase
             portraits and time series.
+        executor: Optional :class:`concurrent.futures.Executor` (a process
+            pool, :func:`figure_worker`) that draws and saves the predictive
+            check, the frequency and the time series while this process computes
+            and draws the others; Matplotlib's drawing holds the interpreter, so
+            a second process is what runs it beside the first (rig fit: the
+            figures stage of ``bayeshopf fit``, ``benchmarks/cli_speed.json``).
 
     Returns:
         The paths written, in the order of :data:`FIGURE_NAMES` (then
@@ -155,19 +165,18 @@ def plot_all(
     units = dict(length_unit=length_unit, angle_unit=angle_unit)
     ppc = fit.ppc(ci)
     mu = diagram_grid(fit)
-    diagram = fit.diagram(mu, ci)
-    amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
-    orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
-    figures = [(FIGURE_NAMES[0], plot_bifurcation(
-        diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
-        amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
-        zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit))]
-    if recordings is not None:
-        figures.append((FIGURE_NAMES[1], plot_phase_portraits(
-            fit, recordings, truth=orbit_truth, offsets=offsets, **units)))
-    figures.append((FIGURE_NAMES[2], plot_ppc(ppc, amplitude_units=fit.amplitude_units,
-                                              amplitude_label=amp_label,
-                                              length_unit=length_unit)))
+    names = FIGURE_NAMES + (FREQUENCY_FIGURE_NAMES if fit.has_frequency else ())
+    paths = dict(zip(names, (out / n for n in _named(names, fmt)), strict=True))
+    jobs = {}             # name -> future, or the path already written
+
+    def draw(name, builder, *args, **kwargs):      # data only: drawable in another process
+        if executor is None:
+            jobs[name] = save_figure(builder(*args, **kwargs), paths[name], dpi=dpi)
+        else:
+            jobs[name] = executor.submit(_draw_and_save, builder, args, kwargs, paths[name], dpi)
+
+    draw(FIGURE_NAMES[2], plot_ppc, ppc, amplitude_units=fit.amplitude_units,
+         amplitude_label=amp_label, length_unit=length_unit)
     if fit.has_frequency:
         bands, pred = [], []
         branches = ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
@@ -178,11 +187,28 @@ def plot_all(
         measured = [(m, hz, "unstable" if u else "stable", se / (2 * np.pi))
                     for m, hz, u, se in zip(f.mu, f.frequency_hz, f.unstable, f.omega_se,
                                             strict=True)]
-        figures.append((FREQUENCY_FIGURE_NAMES[0], plot_frequency(
-            bands, measured, predictive=pred, mu_label=fit.mu_label, mu_units=fit.mu_units,
-            ci=ci)))
+        draw(FREQUENCY_FIGURE_NAMES[0], plot_frequency, bands, measured, predictive=pred,
+             mu_label=fit.mu_label, mu_units=fit.mu_units, ci=ci)
         if recordings is not None:
-            figures.append((FREQUENCY_FIGURE_NAMES[1], plot_time_series(
-                fit.time_series_bands(recordings, ci=ci), mu_label=fit.mu_label,
-                mu_units=fit.mu_units, offsets=offsets, ci=ci, **units)))
-    return [save_figure(fig, out / _named([name], fmt)[0], dpi=dpi) for name, fig in figures]
+            draw(FREQUENCY_FIGURE_NAMES[1], plot_time_series,
+                 fit.time_series_bands(recordings, ci=ci), mu_label=fit.mu_label,
+                 mu_units=fit.mu_units, offsets=offsets, ci=ci, **units)
+    # the diagram (its truth is a function of a simulator) and the phase portraits
+    # (the fit's orbits) are drawn here
+    diagram = fit.diagram(mu, ci)
+    amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
+    orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
+    jobs[FIGURE_NAMES[0]] = save_figure(plot_bifurcation(
+        diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
+        amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
+        zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit),
+        paths[FIGURE_NAMES[0]], dpi=dpi)
+    if recordings is not None:
+        jobs[FIGURE_NAMES[1]] = save_figure(plot_phase_portraits(
+            fit, recordings, truth=orbit_truth, offsets=offsets, **units),
+            paths[FIGURE_NAMES[1]], dpi=dpi)
+    return [j if isinstance(j, Path) else j.result() for n in names if (j := jobs.get(n))]
+
+
+def _draw_and_save(builder, args, kwargs, path, dpi) -> Path:
+    return save_figure(builder(*args, **kwargs), path, dpi=dpi)
