@@ -259,7 +259,8 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
         from bayeshopf import _preload
 
         _preload.request("bayeshopf.plotting")
-        worker = _preload.figure_worker()
+        if _preload.available_cores() > 1:   # on one core it would only add its start
+            worker = _preload.figure_worker()
     try:
         return _fit_and_save(rs, criticality, args, out, truth, extra, worker)
     finally:
