@@ -98,8 +98,13 @@ def test_compiled_call_traces_once_per_key_and_gives_the_jit_result(monkeypatch,
     assert made == [2.0]
     assert len(list(tmp_path.glob(f"{cache.STORED_PREFIX}probe-*.bin"))) == 1
     assert call(3.0, x) == float(jnp.sin(3.0 * x).sum() + jnp.sqrt(3.0))   # a new key
+    assert made == [2.0, 3.0]
+    # the stored program takes any argument of the same shape (NUTS: other chain keys)
     assert call(2.0, x + 1.0) == float(jnp.sin(2.0 * (x + 1.0)).sum() + jnp.sqrt(2.0))
-    assert made == [2.0, 3.0, 2.0]         # a new argument value is a new key too
+    assert made == [2.0, 3.0]
+    assert call(2.0, jnp.arange(4.0)) == float(jnp.sin(2.0 * jnp.arange(4.0)).sum()
+                                               + jnp.sqrt(2.0))
+    assert made == [2.0, 3.0, 2.0]         # a new shape is traced again
 
 
 def test_compiled_call_replaces_a_damaged_file_and_runs_without_a_cache(monkeypatch, tmp_path):

@@ -154,15 +154,18 @@ _SOURCE_DIGEST: list[bytes] = []
 
 
 def _digest(name: str, key, args) -> str:
+    """Hex SHA-256 of the sources, ``name``, ``key``'s values and the arguments' shapes."""
     h = hashlib.sha256(_source_digest())
     h.update(name.encode())
-    for leaf in jax.tree_util.tree_leaves((key, args)):
+    for leaf in jax.tree_util.tree_leaves(key):
         if isinstance(leaf, str | int | float | bool | bytes):
             h.update(repr(leaf).encode())
         else:
             a = np.asarray(leaf)
             h.update(f"{a.dtype}{a.shape}".encode())
             h.update(np.ascontiguousarray(a).tobytes())
+    for leaf in jax.tree_util.tree_leaves(args):   # the program takes any values of these
+        h.update(f"{np.result_type(leaf)}{np.shape(leaf)}".encode())
     h.update(str(jax.tree_util.tree_structure((key, args))).encode())
     return h.hexdigest()[:40]
 
@@ -180,7 +183,7 @@ def compiled_call(name: str, make: Callable[[], Callable], args: tuple, key) -> 
     ``make`` is not even called and only the (cached) compilation remains.
 
     The file name is a SHA-256 of ``name``, ``key`` (everything the traced
-    function closes over: data, settings), the arguments' values, bayeshopf's
+    function closes over: data, settings), the arguments' shapes, bayeshopf's
     own source files, the versions of jax, jaxlib, numpyro and optax, and
     ``XLA_FLAGS``; a change to any of them makes a new file, and a file that
     does not load is replaced. Without the persistent cache

@@ -376,7 +376,7 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
 
     keys = jax.random.split(key, settings.num_chains)
     _preload.start()   # ArviZ (for R̂ and ESS next) imports while the chains run
-    # compiled once per data set, MAP point and settings, then loaded (inference.cache)
+    # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
     draws, diverging, steps, laplace = compiled_call(
         "nuts", make, (keys,), key=(model_key(kwargs), x0, n_warm, n_draw, settings.dense_mass,
                                     settings.target_accept, settings.max_tree_depth))
