@@ -78,8 +78,9 @@ def configure_xla_cpu() -> list[str]:
       does not know). The fusion emitters cost compile time, not run time: with
       an empty compilation cache ``bayeshopf fit`` of the rig took 38.8 s
       without them against 49.7 s with them, ``bayeshopf demo`` 51.9 s against
-      60.2 s; warm, the rig took 22.3 s against 21.8 s
-      (``benchmarks/cli_speed.json``, ``cli_speed_fusion_emitters.json``).
+      60.2 s; warm, the rig took 22.3 s against 21.8 s (commit 2908a26,
+      ``benchmarks/cli_speed_fusion_emitters.json`` against that commit's
+      ``cli_speed.json``, both from one machine and session).
 
     Takes effect only before JAX's first computation in the process (the CLI and
     the test suite call it first).
