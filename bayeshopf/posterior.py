@@ -493,16 +493,14 @@ def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
 
 
 _ORBIT_FNS: dict[int, tuple] = {}
-_FREQUENCY_FNS: dict[int, tuple] = {}
 
 
 def clear_orbit_jits() -> None:
-    """Forget the compiled orbit and frequency functions of every spec.
+    """Forget the compiled orbit functions of every spec.
 
     Called by :func:`~bayeshopf.inference.cache.release_compiled`.
     """
     _ORBIT_FNS.clear()
-    _FREQUENCY_FNS.clear()
 
 
 def _orbit_fn(spec: cm.CollapsedSpec):
@@ -526,26 +524,15 @@ def _orbit_fn(spec: cm.CollapsedSpec):
     return fn
 
 
-def _frequency_fn(spec: cm.CollapsedSpec):
-    """The jitted ``(θ, γ, μ, sign) ↦ Ω`` (rad/s, ``(n, n_mu)``), compiled once per spec.
+def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
+    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid, ``(n, n_mu)``.
 
-    Run op by op, the curve's few dozen operations cost about 0.1 s a call in a
-    fresh process (each operation loaded from the compilation cache), and the
-    CLI calls it some twenty times.
+    Compiled once per spec (:func:`~bayeshopf.model.collapsed.spec_jit`): run op
+    by op, its few dozen operations cost about 0.1 s a call in a fresh process,
+    and the CLI calls it some twenty times.
     """
-    hit = _FREQUENCY_FNS.get(id(spec))
-    if hit is not None and hit[0] is spec:
-        return hit[1]
-
-    def fn(th, gammas, mu, sign):
-        th = {k: v[:, None] for k, v in th.items()}
-        return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
-
-    fn = jax.jit(fn)
-    if len(_FREQUENCY_FNS) > 16:
-        _FREQUENCY_FNS.clear()
-    _FREQUENCY_FNS[id(spec)] = (spec, fn)
-    return fn
+    th = {k: v[:, None] for k, v in th.items()}
+    return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
 
 
 def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: float, *,
@@ -581,7 +568,8 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     ensure_x64()
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
     th = {k: jnp.asarray(v) for k, v in theta.items() if np.ndim(v) == 1}
-    om = np.asarray(_frequency_fn(spec)(th, jnp.asarray(gammas), jnp.asarray(mu), float(sign)))
+    om = np.asarray(cm.spec_jit(spec, _frequency_grid)(th, jnp.asarray(gammas),
+                                                       jnp.asarray(mu), float(sign)))
     if predictive:
         sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
         om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))

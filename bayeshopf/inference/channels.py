@@ -161,7 +161,7 @@ def _draws(post, idx) -> tuple[dict, jnp.ndarray]:
 def _basis_along_orbits(post, idx, mu, sign, phi) -> np.ndarray:
     """``b`` along each draw's predicted orbit at μ, ``(n_draws, n_phi, len(BASIS))``."""
     theta, betas = _draws(post, idx)
-    return np.asarray(cm._jitted(post.spec, _basis_along)(
+    return np.asarray(cm.spec_jit(post.spec, _basis_along)(
         theta, betas, jnp.asarray(mu, float), jnp.asarray(sign, float), jnp.asarray(phi)))
 
 
@@ -230,7 +230,7 @@ def fit_channel(
     mu0 = np.asarray(post.samples["mu0"])
     idx = np.sort(rng.choice(mu0.size, size=min(n_draws, mu0.size), replace=False))
     theta, betas = _draws(post, idx)
-    find = cm._jitted(post.spec, _nearest_phase)
+    find = cm.spec_jit(post.spec, _nearest_phase)
     n_c = 2 * n_harmonics + 1
     phi_grid = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
     proj = np.linalg.pinv(_fourier(phi_grid, n_harmonics))  # grid values -> coefficients

@@ -375,7 +375,6 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
         return run
 
     keys = jax.random.split(key, settings.num_chains)
-    _preload.start()   # ArviZ (for R̂ and ESS next) imports while the chains run
     # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
     draws, diverging, steps, laplace = compiled_call(
         "nuts", make, (keys,), key=(model_key(kwargs), x0, n_warm, n_draw, settings.dense_mass,
@@ -503,6 +502,7 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
                 "steps" if method == "nuts" else f"{settings.svi_steps} steps")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
     sampler = {}
+    _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while the sampler runs
     if method == "nuts":
         chains, div, sampler = _nuts(kwargs, map_point, settings, k_post, progress)
         losses = np.zeros(0)

@@ -513,7 +513,7 @@ def frequency_marginal(spec: CollapsedSpec, theta: dict, sigma_omega, mu, sign, 
 _JITS: dict[tuple, tuple] = {}
 
 
-def _jitted(spec: CollapsedSpec, fn):
+def spec_jit(spec: CollapsedSpec, fn):
     """``fn`` with ``spec`` bound, compiled once per spec.
 
     NumPyro runs the model eagerly to find its sites (``initialize_model``), and
@@ -551,14 +551,14 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
     """
     theta = normal_form_sites(spec)
     tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
-    marginals = _jitted(spec, coefficient_marginals)(theta, tau_mu, tau_shape, sigma, sigma_rel,
+    marginals = spec_jit(spec, coefficient_marginals)(theta, tau_mu, tau_shape, sigma, sigma_rel,
                                                      mu, sign, coeffs, coeffs_se)
     for c in range(2):
         numpyro.factor(f"marginal_{c}", marginals[c])
     if spec.omega_centre is not None and omega is not None:
         sigma_omega = numpyro.sample(
             "sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
-        numpyro.factor("marginal_omega", _jitted(spec, frequency_marginal)(
+        numpyro.factor("marginal_omega", spec_jit(spec, frequency_marginal)(
             theta, sigma_omega, mu, sign, omega, omega_se))
 
 
