@@ -69,3 +69,21 @@ def execute_fast(notebook: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     finally:
         nbformat.write(nb, copy)
     return _outputs(nb)
+
+
+def built_sources(script: Path) -> list[tuple[str, str]]:
+    """The cells (type, source) that a ``notebooks/_src/build_NN.py`` script writes.
+
+    The script runs with ``nbformat.write`` caught, so nothing is written.
+    """
+    nbformat = pytest.importorskip("nbformat")
+    written = []
+    mp = pytest.MonkeyPatch()
+    mp.setattr(nbformat, "write", lambda nb, path, *a, **k: written.append(nb))
+    try:
+        exec(compile(script.read_text(), str(script), "exec"),
+             {"__file__": str(script), "__name__": "__main__"})
+    finally:
+        mp.undo()
+    assert len(written) == 1, f"{script.name} wrote {len(written)} notebooks"
+    return [(c.cell_type, c.source) for c in written[0].cells]

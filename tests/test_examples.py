@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from notebook_runs import execute_fast, stored
+from notebook_runs import built_sources, execute_fast, stored
 
 from bayeshopf.plotting import FIGURE_NAMES
 
@@ -81,3 +81,26 @@ def test_stored_notebook_has_outputs_of_a_full_run():
     assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
     assert run.n_images >= 5
     assert "fast mode: False" in run.text, "stored outputs must come from a default-settings run"
+
+
+@pytest.mark.notebooks
+@pytest.mark.parametrize("number, name", [("02", "02_numerical_examples"),
+                                          ("03", "03_wind_tunnel"),
+                                          ("04", "04_missing_physics"),
+                                          ("05", "05_experimental_design")])
+def test_stored_notebook_is_a_full_run_of_its_build_script(number: str, name: str):
+    """A stored notebook holds exactly the cells its ``_src`` script writes now, all executed.
+
+    An edit to a build script without a new run fails here: the stored outputs
+    would no longer be those of the code shown.
+    """
+    path = REPO / "notebooks" / f"{name}.ipynb"
+    script = REPO / "notebooks" / "_src" / f"build_{number}.py"
+    run = stored(path)
+    nbformat = pytest.importorskip("nbformat")
+    cells = [(c.cell_type, c.source) for c in nbformat.read(path, as_version=4).cells]
+    assert cells == built_sources(script), f"{path.name} differs from what {script.name} writes"
+    assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
+    assert not run.errors
+    assert "fast mode: False" in run.text or "fast mode" not in "".join(
+        c.source for c in run.code), "stored outputs must come from a default-settings run"

@@ -48,6 +48,10 @@ from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
+from bayeshopf.inference.cache import configure_xla_cpu
+
+configure_xla_cpu()  # before any JAX work, as the CLI does
+
 import numpy as np
 from IPython.display import Markdown, display
 
