@@ -9,8 +9,8 @@ this module, so a move to 1.x changes this file only; the saved
 ``xarray.open_datatree`` opens as well.
 
 ArviZ is imported on first use (:func:`arviz`), not with this module: its
-import takes about 3 s, which the CLI spends in a background thread while the
-sampler runs (:func:`bayeshopf.cli.main.preload`).
+import takes about 3 s, which the sampler starts in a background thread beside
+its chains (:func:`bayeshopf._preload.start`).
 """
 
 from __future__ import annotations
