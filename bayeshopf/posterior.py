@@ -508,13 +508,10 @@ def _orbit_fn(spec: cm.CollapsedSpec):
     hit = _ORBIT_FNS.get(id(spec))
     if hit is not None and hit[0] is spec:
         return hit[1]
-    P = jnp.asarray(cm.projection(spec.n_harmonics, N_PHI))
-    phi = 2 * jnp.pi * jnp.arange(N_PHI) / N_PHI
 
-    def one(a, sign):
+    def one(a, sign):     # Φ(μ) β: the design of the likelihood, at every μ of the grid
         t, b, mu = a
-        w = jax.vmap(lambda m: cm.orbit(spec, t, b, m, sign, phi))(mu)   # (n_mu, N, 2)
-        return jnp.einsum("kn,mnc->mck", P, w)
+        return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b)
 
     # lax.map over draws: XLA's batched linear algebra is slow on CPU
     fn = jax.jit(lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu)))

@@ -26,6 +26,36 @@ def test_log_marginal_equals_the_gaussian_it_collapses():
     np.testing.assert_allclose(cm.log_marginal(Phi, y, d, sd), direct, rtol=1e-10)
 
 
+def test_log_marginal_derivatives_equal_those_of_the_dense_gaussian():
+    # the hand-written JVP against reverse mode through the dense n x n Cholesky
+    # (jax.scipy's multivariate normal), first and second derivatives, on one
+    # smooth path through all four arguments
+    rng = np.random.default_rng(2)
+    n, J = 24, 7
+    Phi0, dPhi = rng.standard_normal((n, J)), rng.standard_normal((n, J))
+    y0, dy = rng.standard_normal(n), rng.standard_normal(n)
+    d0, dd = np.exp(rng.standard_normal(n)) * 0.2, rng.standard_normal(n)
+    sd0, dsd = np.exp(rng.standard_normal(J)), rng.standard_normal(J)
+
+    def args(x):
+        return (Phi0 + x[0] * dPhi + x[1] ** 2 * dPhi[::-1], y0 + x[1] * dy,
+                d0 * jnp.exp(0.3 * x[2] * dd), sd0 * jnp.exp(0.3 * (x[0] - x[2]) * dsd))
+
+    def dense(x):
+        Phi, y, d, sd = args(x)
+        cov = (Phi * sd**2) @ Phi.T + jnp.diag(d)
+        return jax.scipy.stats.multivariate_normal.logpdf(y, jnp.zeros(n), cov)
+
+    def collapsed(x):
+        return cm.log_marginal(*args(x))
+
+    x = jnp.array([0.3, -0.4, 0.5])
+    for derivative, rtol in ((lambda f: f, 1e-10), (jax.grad, 1e-8), (jax.hessian, 1e-7)):
+        # compiled: op by op, the Hessians alone took 27 s of compiling
+        np.testing.assert_allclose(jax.jit(derivative(collapsed))(x),
+                                   jax.jit(derivative(dense))(x), rtol=rtol, atol=1e-9)
+
+
 def test_conditional_draws_have_the_closed_form_moments():
     rng = np.random.default_rng(1)
     Phi = rng.standard_normal((20, 4))
@@ -52,6 +82,36 @@ def test_design_is_the_projection_of_the_mapped_circle():
         w = cm.orbit(spec, theta, beta, mu[i], sign[i], phi)
         coeffs = cm.projection(3, 64) @ w                       # (2K+1, 2)
         np.testing.assert_allclose(Phi[i] @ beta, coeffs, atol=1e-12)
+
+
+def test_predicted_orbit_coefficients_are_the_fourier_coefficients_of_the_mapped_circle():
+    # posterior.orbit_coefficients (the bands, the diagram, the checks) against the
+    # DFT of the map evaluated on 256 phases of each draw's circle; nan off the branch
+    from bayeshopf.posterior import orbit_coefficients
+
+    spec = _spec()
+    rng = np.random.default_rng(3)
+    theta = {"mu0": np.array([17.0, 16.6]), "mu_fold": np.array([14.5, 14.8]),
+             "w_unfold": np.array([0.8, -0.3])}
+    theta["a2"] = 2 * np.sqrt(-np.asarray(cm.unfolding(theta["mu_fold"], theta["mu0"],
+                                                       theta["w_unfold"], theta["mu_fold"])))
+    betas = rng.standard_normal((2, spec.n_basis, 2))
+    mu = np.array([14.0, 15.5, 16.3])
+    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    K = spec.n_harmonics
+    for sign in (normal_form.STABLE, normal_form.UNSTABLE):
+        got = orbit_coefficients(spec, theta, betas, mu, sign)      # (draw, μ, channel, 2K+1)
+        for n in range(2):
+            t = {k: v[n] for k, v in theta.items()}
+            for i in range(mu.size):
+                w = np.asarray(cm.orbit(spec, t, betas[n], mu[i], sign, phi))     # (256, 2)
+                F = np.fft.rfft(w, axis=0) / phi.size
+                ref = np.concatenate([F[:1].real, 2 * F[1:K + 1].real, -2 * F[1:K + 1].imag]).T
+                if np.isnan(w).any():
+                    assert np.isnan(got[n, i]).all()
+                else:
+                    np.testing.assert_allclose(got[n, i], ref, atol=1e-9 * np.abs(ref).max())
+    assert np.isnan(orbit_coefficients(spec, theta, betas, mu, normal_form.STABLE)[:, 0]).all()
 
 
 def test_curved_unfolding_keeps_the_hopf_point_and_is_monotone():

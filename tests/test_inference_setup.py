@@ -32,6 +32,15 @@ def test_older_xla_gets_no_flag_it_does_not_know(monkeypatch):
     assert "fusion_emitters" not in os.environ["XLA_FLAGS"]
 
 
+def test_blas_gets_one_thread_unless_the_user_chose(monkeypatch):
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    cache.configure_xla_cpu()
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
+    cache.configure_xla_cpu()
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
+
+
 def test_laplace_covariance_of_a_gaussian_potential_is_its_covariance():
     rng = np.random.default_rng(0)
     A = rng.standard_normal((4, 4))

@@ -54,6 +54,8 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
 SINGLE_THREAD_EIGEN = "--xla_cpu_multi_thread_eigen=false"
 #: XLA flag that compiles CPU fusions with the classic emitters (jaxlib ≥ 0.10).
 CLASSIC_FUSION = "--xla_cpu_use_fusion_emitters=false"
+#: Threads of OpenBLAS, in whose scipy build XLA's CPU LAPACK kernels run.
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")
 
 
 def _jaxlib_version() -> tuple[int, ...]:
@@ -82,12 +84,22 @@ def configure_xla_cpu() -> list[str]:
       ``benchmarks/cli_speed_fusion_emitters.json`` against that commit's
       ``cli_speed.json``, both from one machine and session).
 
+    It also sets ``OPENBLAS_NUM_THREADS=1`` (:data:`BLAS_THREADS`) unless the
+    user set it. jaxlib's Cholesky factorisations and triangular solves on CPU
+    call scipy's OpenBLAS, whose worker threads busy-wait between calls: on 2
+    cores the NUTS stage of the rig used two cores' CPU time for the wall time
+    of one, and the second core was not free for anything else
+    (``benchmarks/bench_xla_cpu_settings.py``). The matrices here are far too
+    small to gain from threads. That library is loaded at JAX's first
+    linear-algebra call, so this must come before it.
+
     Takes effect only before JAX's first computation in the process (the CLI and
     the test suite call it first).
 
     Returns:
         The flags of this function now in ``XLA_FLAGS``.
     """
+    os.environ.setdefault(*BLAS_THREADS)
     flags = os.environ.get("XLA_FLAGS", "")
     wanted = [SINGLE_THREAD_EIGEN]
     if _jaxlib_version() >= (0, 10):
