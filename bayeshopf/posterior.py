@@ -513,7 +513,7 @@ def _orbit_fn(spec: cm.CollapsedSpec):
         t, b, mu = a
         return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b)
 
-    # lax.map over draws: XLA's batched linear algebra is slow on CPU
+    # lax.map over draws: one draw's network features (μ × phase × unit) in memory at a time
     fn = jax.jit(lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu)))
     if len(_ORBIT_FNS) > 16:
         _ORBIT_FNS.clear()
