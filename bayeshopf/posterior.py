@@ -698,7 +698,9 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         for k, v in conv.items():
             if not v["ok"]:
                 warnings.append(f"NUTS: {k} has R̂ {v['r_hat']:.3f} and bulk ESS "
-                                f"{v['ess_bulk']:.0f} (need R̂ ≤ {ci.RHAT_MAX}, ESS ≥ {ci.ESS_MIN})")
+                                f"{v['ess_bulk']:.0f} (need R̂ ≤ {ci.RHAT_MAX}, ESS ≥ {ci.ESS_MIN}) "
+                                f"after {run.sampler.get('draws_per_chain', '?')} draws per chain "
+                                f"(max_samples {post.settings.max_samples})")
         if run.divergences:
             warnings.append(f"NUTS: {run.divergences} divergent transitions")
     else:

@@ -59,6 +59,7 @@ def one(seed: int, short: bool, target_accept: float | None = None) -> dict:
     res["held_out"] = held_out_check(post, truth)
     res["orbit_error"] = [e["relative"] for e in post.diagnostics["fit"]["orbit_error"]]
     res["converged"] = all(v["ok"] for v in post.diagnostics["posterior"]["sites"].values())
+    res["draws_per_chain"] = post.diagnostics["posterior"].get("draws_per_chain")
     if post.has_frequency:   # measured frequencies inside their 90% predictive bands
         res["frequency_inside"] = [e["inside_ci90"] for e in post.diagnostics["fit"]["frequency"]]
     res["warnings"] = post.diagnostics["warnings"]
@@ -90,6 +91,12 @@ def summary(short: bool, out: Path = OUT) -> None:
     print(f"- orbit errors: max {100 * max(max(r['orbit_error']) for r in rows):.2f}%")
     print(f"- NUTS converged (R̂ ≤ 1.01, ESS ≥ 400) in {sum(r['converged'] for r in rows)}/{n}; "
           f"median wall {np.median([r['wall_s'] for r in rows]):.0f} s per fit")
+    draws = [r.get("draws_per_chain") for r in rows]
+    if all(d is not None for d in draws):
+        longer = [f"{r['seed']}: {r['draws_per_chain']}" for r in rows
+                  if r["draws_per_chain"] > min(draws)]
+        print(f"- draws per chain: {min(draws)} in {draws.count(min(draws))}/{n}"
+              + (f"; extended: {', '.join(longer)}" if longer else ""))
 
 
 def main(argv):

@@ -4,10 +4,15 @@ NUTS's mass matrix and the imports done beside it."""
 import os
 import subprocess
 import sys
+from dataclasses import replace
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
+from jax.flatten_util import ravel_pytree
 
+from bayeshopf.errors import FitError
 from bayeshopf.inference import cache
 from bayeshopf.inference.collapsed import laplace_covariance
 
@@ -86,6 +91,7 @@ def test_model_functions_are_reused_only_for_the_same_arguments():
 def _stored_counting(monkeypatch, folder):
     """``compiled_call`` with the cache in ``folder``, and a counter of ``make`` calls."""
     monkeypatch.setattr(cache, "_ENABLED", [str(folder)] if folder else [])
+    monkeypatch.setattr(cache, "_COMPILED", {})
     made = []
 
     def call(scale, x):
@@ -103,7 +109,7 @@ def test_compiled_call_traces_once_per_key_and_gives_the_jit_result(monkeypatch,
     x = jnp.linspace(0.0, 1.0, 5)
     expected = float(jnp.sin(2.0 * x).sum() + jnp.sqrt(2.0))
     assert call(2.0, x) == expected
-    assert call(2.0, x) == expected        # read back from the stored file
+    assert call(2.0, x) == expected        # kept from the first call (stored on disk too)
     assert made == [2.0]
     assert len(list(tmp_path.glob(f"{cache.STORED_PREFIX}probe-*.bin"))) == 1
     assert call(3.0, x) == float(jnp.sin(3.0 * x).sum() + jnp.sqrt(3.0))   # a new key
@@ -122,10 +128,15 @@ def test_compiled_call_replaces_a_damaged_file_and_runs_without_a_cache(monkeypa
     first = call(2.0, x)
     (f,) = tmp_path.glob(f"{cache.STORED_PREFIX}probe-*.bin")
     f.write_bytes(b"not a serialized program")
+    assert call(2.0, x) == first and made == [2.0]      # this process keeps what it loaded
+    cache._COMPILED.clear()                             # as a new process would start
     assert call(2.0, x) == first and made == [2.0, 2.0]
     assert f.read_bytes() != b"not a serialized program"
     call, made = _stored_counting(monkeypatch, None)
-    assert call(2.0, x) == first and call(2.0, x) == first and made == [2.0, 2.0]
+    # without a cache on disk: traced once per key in a process, then kept until released
+    assert call(2.0, x) == first and call(2.0, x) == first and made == [2.0]
+    cache.release_compiled()
+    assert call(2.0, x) == first and made == [2.0, 2.0]
 
 
 _TWO_PROCESSES = """
@@ -160,3 +171,68 @@ def test_arviz_and_matplotlib_are_not_imported_with_the_inference_core():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"
+
+
+def _banana(monkeypatch):
+    """A two-site posterior for NUTS's stages, in place of the collapsed model's functions.
+
+    "mu0" ~ N(0, 1) and "a2" | "mu0" ~ N(mu0² / 2, 0.5²): curved, so that NUTS's trees
+    and its adaptation have work to do, and cheap to compile.
+    """
+    from types import SimpleNamespace
+
+    from bayeshopf.inference import collapsed as ci
+
+    unravel = ravel_pytree({"mu0": 0.0, "a2": 0.0})[1]
+
+    def potential(x):
+        p = unravel(x)
+        return 0.5 * p["mu0"] ** 2 + 0.5 * ((p["a2"] - 0.5 * p["mu0"] ** 2) / 0.5) ** 2
+
+    info = SimpleNamespace(postprocess_fn=lambda p: p)
+    monkeypatch.setattr(ci, "model_functions", lambda kw: (info, unravel, potential))
+    monkeypatch.setattr(ci, "model_key", lambda kw: ("banana",))
+    monkeypatch.setattr(cache, "_COMPILED", {})
+    start = SimpleNamespace(unconstrained={"mu0": 0.3, "a2": 0.1})
+    return potential, unravel, start
+
+
+def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(monkeypatch):
+    """Chains advanced chunk by chunk are NumPyro's MCMC from the same start and keys;
+    extended while R̂ or ESS fails, up to the cap, as one longer run."""
+    from numpyro.infer import MCMC, NUTS
+
+    from bayeshopf.inference import collapsed as ci
+
+    potential, unravel, start = _banana(monkeypatch)
+    settings = replace(ci.CollapsedSettings(), num_chains=2, num_warmup=150, num_samples=100,
+                       extend_samples=50, max_samples=200)
+    assert ci.nuts_chunk(settings) == 50          # the warm-up spans three calls
+    key = jax.random.PRNGKey(3)
+    # 2 × 100 draws cannot reach a bulk ESS of 400: extended by 50 until the cap of 200
+    long, div_long, sampler = ci._nuts({}, start, settings, key, progress=False)
+    assert sampler["draws_per_chain"] == 200 and long["mu0"].shape == (2, 200)
+    assert sampler["mass_matrix_start"] == "laplace"
+    # where every check passes, the first 100 draws are the answer: the first 100 of
+    # the extended run, from the same program (only the run's length depends on them)
+    monkeypatch.setattr(ci, "ESS_MIN", 0)
+    monkeypatch.setattr(ci, "RHAT_MAX", np.inf)
+    short, div, sampler = ci._nuts({}, start, settings, key, progress=False)
+    assert sampler["draws_per_chain"] == 100
+    np.testing.assert_array_equal(short["a2"], long["a2"][:, :100])
+
+    x0 = ravel_pytree(start.unconstrained)[0]
+    cov, _ = ci.laplace_covariance(potential, x0)
+    mcmc = MCMC(NUTS(potential_fn=potential, dense_mass=True, inverse_mass_matrix=cov),
+                num_warmup=150, num_samples=100, num_chains=2, chain_method="sequential",
+                progress_bar=False)
+    mcmc.run(key, init_params=jnp.stack([x0, x0]), extra_fields=("diverging",))
+    ref = jax.vmap(jax.vmap(unravel))(mcmc.get_samples(group_by_chain=True))
+    # the same chains to rounding; a warm-up restarted at a call's boundary would give
+    # another step size and mass matrix, and other draws from the first on
+    for name in ("mu0", "a2"):
+        np.testing.assert_allclose(short[name], ref[name], rtol=0, atol=1e-8)
+    assert div == int(mcmc.get_extra_fields()["diverging"].sum())
+    # a cap below the first draws is refused, in one line naming the settings
+    with pytest.raises(FitError, match="num_samples=100, max_samples=50"):
+        ci._nuts({}, start, replace(settings, max_samples=50), key, progress=False)

@@ -217,8 +217,9 @@ def _print_diagnostics(summary: dict) -> None:
     if post.get("method") == "nuts" and post.get("sites"):
         worst = max(v["r_hat"] for v in post["sites"].values())
         ess = min(v["ess_bulk"] for v in post["sites"].values())
-        print(f"\nNUTS, {post['chains']} chains: R̂ ≤ {worst:.3f}, bulk ESS ≥ {ess:.0f} for "
-              f"{', '.join(post['sites'])}; {post['divergences']} divergences")
+        draws = (f" × {post['draws_per_chain']} draws" if "draws_per_chain" in post else "")
+        print(f"\nNUTS, {post['chains']} chains{draws}: R̂ ≤ {worst:.3f}, bulk ESS ≥ {ess:.0f} "
+              f"for {', '.join(post['sites'])}; {post['divergences']} divergences")
     errs = [e["relative"] for e in diag["fit"]["orbit_error"] if e["relative"] is not None]
     if errs:
         print(f"orbit errors (posterior-median orbit against the measured mean orbit): "

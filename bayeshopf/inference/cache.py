@@ -133,6 +133,7 @@ def release_compiled() -> None:
 
     collapsed.clear_jits()
     clear_model_functions()
+    _COMPILED.clear()
     posterior.clear_orbit_jits()
     jax.clear_caches()
 
@@ -210,10 +211,34 @@ def compiled_call(name: str, make: Callable[[], Callable], args: tuple, key) -> 
         key: A pytree of arrays, strings and numbers: every value the function
             closes over.
     """
+    return compiled_function(name, make, args, key)(*args)
+
+
+def compiled_function(name: str, make: Callable[[], Callable], args: tuple, key) -> Callable:
+    """The jitted function :func:`compiled_call` would run, to call more than once.
+
+    The same stored artifact and file name as :func:`compiled_call`; ``args``
+    only gives the shapes the function is compiled for. Calls with arguments
+    of those shapes run the compiled program without tracing, lowering or
+    loading anything again (a loop of calls, such as NUTS's chains advanced in
+    stages), and so does a later request for the same name and key in this
+    process, until :func:`release_compiled`.
+    """
+    digest = _digest(name, key, args)
+    if (name, digest) not in _COMPILED:
+        _COMPILED[name, digest] = _load_or_export(name, digest, make, args)
+    return _COMPILED[name, digest]
+
+
+#: The functions :func:`compiled_function` returned in this process, by name and digest.
+_COMPILED: dict[tuple[str, str], Callable] = {}
+
+
+def _load_or_export(name: str, digest: str, make: Callable[[], Callable], args) -> Callable:
     folder = _ENABLED[0] if _ENABLED else None
     if folder is None:
-        return jax.jit(make())(*args)
-    path = Path(folder) / f"{STORED_PREFIX}{name}-{_digest(name, key, args)}.bin"
+        return jax.jit(make())
+    path = Path(folder) / f"{STORED_PREFIX}{name}-{digest}.bin"
     exp = None
     if path.is_file():
         try:
@@ -229,4 +254,4 @@ def compiled_call(name: str, make: Callable[[], Callable], args: tuple, key) -> 
         except OSError:    # a read-only cache: the call still works
             with contextlib.suppress(OSError):
                 tmp.unlink()
-    return jax.jit(exp.call)(*args)
+    return jax.jit(exp.call)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -42,7 +43,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
-from bayeshopf.inference.cache import compiled_call
+from bayeshopf.inference.cache import compiled_call, compiled_function
 from bayeshopf.model import collapsed as cm
 
 #: Gradient norm (unconstrained space) below which the MAP counts as converged.
@@ -69,7 +70,11 @@ class CollapsedSettings:
         inference: ``"nuts"`` (default) or ``"svi"``.
         num_chains: NUTS chains.
         num_warmup: NUTS warm-up steps per chain.
-        num_samples: NUTS draws per chain.
+        num_samples: NUTS draws per chain before the first convergence check.
+        extend_samples: Draws per chain added while a checked site fails R̂ or
+            ESS (:data:`RHAT_MAX`, :data:`ESS_MIN`).
+        max_samples: Most draws per chain; the chains stop here whatever the
+            diagnostics say, and the CLI warns about the sites that fail.
         dense_mass: Adapt a dense mass matrix (the gaps, ``w`` and ``τ_μ`` are
             correlated: on the rig it halves the tree size and doubles the ESS
             per draw against a diagonal one; ``benchmarks/nuts_mass.json``).
@@ -92,6 +97,8 @@ class CollapsedSettings:
     num_chains: int = 4
     num_warmup: int = 500
     num_samples: int = 500
+    extend_samples: int = 250
+    max_samples: int = 2000
     dense_mass: bool = True
     target_accept: float = 0.8
     max_tree_depth: int = 10
@@ -104,8 +111,8 @@ class CollapsedSettings:
     @classmethod
     def fast(cls) -> CollapsedSettings:
         """Shorter chains for smoke tests (R̂ and ESS then usually fail their thresholds)."""
-        return cls(num_chains=2, num_warmup=200, num_samples=200, svi_steps=1000,
-                   n_svi_draws=400)
+        return cls(num_chains=2, num_warmup=200, num_samples=200, max_samples=200,
+                   svi_steps=1000, n_svi_draws=400)
 
 
 def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
@@ -324,8 +331,17 @@ def laplace_covariance(potential, x):
     return jnp.where(ok, jnp.linalg.inv(jnp.where(ok, H, eye)), eye), ok
 
 
+def nuts_chunk(settings: CollapsedSettings) -> int:
+    """Iterations per compiled call of NUTS.
+
+    The largest number that divides the warm-up, the first draws and each
+    extension: ``gcd(num_warmup, num_samples, extend_samples)``.
+    """
+    return math.gcd(settings.num_warmup, settings.num_samples, settings.extend_samples)
+
+
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
-    """NumPyro's NUTS kernel from the MAP point, every chain in one compiled call.
+    """NumPyro's NUTS kernel from the MAP point, chains extended until they pass.
 
     The mass matrix starts at the MAP's Laplace covariance (the inverse Hessian
     of the potential there) and is adapted from it. From the identity, the
@@ -333,59 +349,109 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     38.0 leapfrog steps per warm-up iteration against 15.5 from the Laplace
     covariance (seed 0, 4 × (500 + 500); ``benchmarks/nuts_start.json``).
 
-    The chains run one after another inside a single ``jit`` (``lax.map`` over
-    their keys), warm-up and draws in one ``scan``: one trace and one compilation
-    for all of them, where ``MCMC`` with ``chain_method="sequential"`` traces
-    each chain's loops and runs the model eagerly once per chain. Not vectorized:
-    XLA's batched Cholesky and triangular solves are slow on CPU (NUTS stage of
-    the 3-DOF demo: 76 s vectorized, 43 s sequential); not parallel either: one
-    CPU device per chain (pmap) took 31 s on the rig's 2 cores against 13 s
-    sequential.
+    Two compiled programs: one starts every chain (the Laplace covariance and
+    NumPyro's ``init``); the other advances every chain by :func:`nuts_chunk`
+    iterations, warm-up or draws alike (the state carries the iteration count
+    and the adaptation), and is called again and again. After ``num_warmup``
+    warm-up iterations and ``num_samples`` draws per chain, R̂ and bulk ESS of
+    the :data:`CHECKED` sites (:func:`convergence`) decide: while one fails and
+    fewer than ``max_samples`` draws per chain exist, every chain gets
+    ``extend_samples`` more. The draws are those of one longer run; only its
+    length depends on the diagnostics.
+
+    The chains run one after another inside each call (``lax.map`` over them),
+    not vectorized: XLA's batched Cholesky and triangular solves are slow on CPU
+    (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential); not
+    parallel either: one CPU device per chain (pmap) took 31 s on the rig's 2
+    cores against 13 s sequential.
     """
+    if not 1 <= settings.num_samples <= settings.max_samples or settings.extend_samples < 1:
+        raise FitError("NUTS settings: expected 1 ≤ num_samples ≤ max_samples and "
+                       f"extend_samples ≥ 1; got num_samples={settings.num_samples}, "
+                       f"max_samples={settings.max_samples}, "
+                       f"extend_samples={settings.extend_samples}")
     x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
-    n_warm, n_draw = settings.num_warmup, settings.num_samples
+    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
+    # everything the programs close over besides the model's data (inference.cache)
+    key_ = (model_key(kwargs), x0, n_warm, settings.dense_mass, settings.target_accept,
+            settings.max_tree_depth)
 
-    def make():
-        info, unravel, potential = model_functions(kwargs)
+    def kernel(potential, cov):
+        return NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
+                    inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
+                    max_tree_depth=settings.max_tree_depth)
 
-        def run(keys):
+    def make_start():
+        _, _, potential = model_functions(kwargs)
+
+        def start(keys):
             cov, ok = (laplace_covariance(potential, x0) if settings.dense_mass
                        else (None, False))
-            kernel = NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
-                          inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
-                          max_tree_depth=settings.max_tree_depth)
+            nuts = kernel(potential, cov)
+            states = jax.lax.map(lambda k: nuts.init(k, n_warm, init_params=x0, model_args=(),
+                                                     model_kwargs={}), keys)
+            return jax.tree.leaves(states), ok
 
-            def chain(k):
-                state = kernel.init(k, n_warm, init_params=x0, model_args=(), model_kwargs={})
+        return start
 
+    def make_advance():
+        info, unravel, potential = model_functions(kwargs)
+
+        def advance(leaves):
+            nuts = kernel(potential, None)
+            # init only configures the kernel (warm-up schedule, tree depth) and gives
+            # the state's structure; the states passed in carry the adapted mass matrix
+            tree = jax.tree.structure(nuts.init(jax.random.PRNGKey(0), n_warm, init_params=x0,
+                                                model_args=(), model_kwargs={}))
+
+            def chain(state_leaves):
                 def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
-                    s = kernel.sample(s, (), {})
+                    s = nuts.sample(s, (), {})
                     return s, (s.z, s.diverging, s.num_steps)
 
-                # one loop for warm-up and draws: the kernel is compiled once, not twice
-                return jax.lax.scan(step, state, None, length=n_warm + n_draw)[1]
+                state, out = jax.lax.scan(step, jax.tree.unflatten(tree, state_leaves), None,
+                                          length=chunk)
+                return jax.tree.leaves(state), out
 
-            x, diverging, steps = jax.lax.map(chain, keys)
+            leaves, (x, diverging, steps) = jax.lax.map(chain, leaves)
             # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
             # vmap: XLA's batched Cholesky is slow on CPU
             draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
-                                x[:, n_warm:].reshape(-1, x.shape[-1]))
-            return draws, diverging[:, n_warm:], steps, ok
+                                x.reshape(-1, x.shape[-1]))
+            return leaves, draws, diverging, steps
 
-        return run
+        return advance
 
     keys = jax.random.split(key, settings.num_chains)
     # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
-    draws, diverging, steps, laplace = compiled_call(
-        "nuts", make, (keys,), key=(model_key(kwargs), x0, n_warm, n_draw, settings.dense_mass,
-                                    settings.target_accept, settings.max_tree_depth))
-    steps = np.asarray(steps)
-    chains = {k: np.asarray(v).reshape((settings.num_chains, n_draw) + v.shape[1:])
-              for k, v in draws.items()}
+    leaves, laplace = compiled_call("nuts-start", make_start, (keys,), key=key_)
+    advance = compiled_function("nuts-advance", make_advance, (leaves,), key=(key_, chunk))
+    draws, diverging, steps = [], [], []
+    done, wanted = 0, n_warm + settings.num_samples
+    while True:
+        leaves, d, div, st = advance(leaves)
+        done += chunk
+        steps.append(np.asarray(st))
+        if done > n_warm:
+            draws.append({k: np.asarray(v).reshape((settings.num_chains, chunk) + v.shape[1:])
+                          for k, v in d.items()})
+            diverging.append(np.asarray(div))
+        if done < wanted:
+            continue
+        chains = {k: np.concatenate([c[k] for c in draws], axis=1) for k in draws[0]}
+        failed = [k for k, v in convergence(chains).items() if not v["ok"]]
+        if not failed or done - n_warm + settings.extend_samples > settings.max_samples:
+            break
+        wanted += settings.extend_samples
+        if progress:
+            print(f"posterior: R̂ or ESS short for {', '.join(failed)} after {done - n_warm} "
+                  f"draws per chain; {settings.extend_samples} more", file=sys.stderr)
+    steps = np.concatenate(steps, axis=1)
     sampler = {"mass_matrix_start": "laplace" if bool(laplace) else "identity",
                "leapfrog_steps_warmup": float(steps[:, :n_warm].mean()) if n_warm else 0.0,
-               "leapfrog_steps_draws": float(steps[:, n_warm:].mean())}
-    return chains, int(np.sum(np.asarray(diverging))), sampler
+               "leapfrog_steps_draws": float(steps[:, n_warm:].mean()),
+               "draws_per_chain": int(done - n_warm)}
+    return chains, int(np.sum(np.concatenate(diverging, axis=1))), sampler
 
 
 def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
@@ -499,7 +565,8 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
     t0 = time.perf_counter()
     if progress:
         what = (f"{settings.num_chains} chains × {settings.num_warmup} + {settings.num_samples} "
-                "steps" if method == "nuts" else f"{settings.svi_steps} steps")
+                f"steps, up to {settings.max_samples} draws while R̂ or ESS fails"
+                if method == "nuts" else f"{settings.svi_steps} steps")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
     sampler = {}
     _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while the sampler runs
