@@ -12,8 +12,8 @@ over a handful of parameters: the normal form's gaps (and the unfolding's ``w``)
    reported.
 3. **Posterior.** ``"nuts"`` (default): NumPyro's NUTS kernel, ``num_chains``
    chains started at the MAP point with the mass matrix started at the MAP's
-   Laplace covariance, all in one compiled call, with R̂ and bulk ESS per site
-   from ArviZ.
+   Laplace covariance, advanced in compiled chunks and extended while R̂ or
+   bulk ESS (ArviZ) of a checked site fails, up to ``max_samples``.
    ``"svi"``: a full-rank Gaussian autoguide started at the MAP point, with an
    ELBO-plateau test.
 4. **Map draws.** For every posterior draw, one exact draw of the map's linear
@@ -110,7 +110,7 @@ class CollapsedSettings:
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
-        """Shorter chains for smoke tests (R̂ and ESS then usually fail their thresholds)."""
+        """Shorter chains for smoke tests, never extended (R̂ and ESS usually fail then)."""
         return cls(num_chains=2, num_warmup=200, num_samples=200, max_samples=200,
                    svi_steps=1000, n_svi_draws=400)
 
