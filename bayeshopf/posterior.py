@@ -685,10 +685,10 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
     warnings = []
     mp = post.map_point
     d = {"map": {"grad_norm": mp.grad_norm, "converged": mp.converged, "steps": mp.n_steps,
-                 "tolerance": ci.MAP_GTOL}}
+                 "polish_evaluations": mp.polish_evaluations, "tolerance": ci.MAP_GTOL}}
     if not mp.converged:
         warnings.append(f"MAP: gradient norm {mp.grad_norm:.2g} after {mp.n_steps} L-BFGS steps "
-                        f"(tolerance {ci.MAP_GTOL:g})")
+                        f"and {mp.polish_evaluations} of the root find (tolerance {ci.MAP_GTOL:g})")
     run = post.run
     if run.method == "nuts":
         conv = ci.convergence(run.chains)

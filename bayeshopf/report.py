@@ -232,7 +232,8 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
                  "map": {"params": {k: np.asarray(v, float).tolist()
                                     for k, v in mp.params.items()},
                          "grad_norm": float(mp.grad_norm), "converged": bool(mp.converged),
-                         "steps": int(mp.n_steps), "log_joint": float(mp.log_joint)},
+                         "steps": int(mp.n_steps), "log_joint": float(mp.log_joint),
+                         "polish_evaluations": int(mp.polish_evaluations)},
                  "divergences": int(post.run.divergences)}
         _write_json(model, stage / MODEL)
         arviz_io.write_netcdf(post.to_inference_data(), stage / POSTERIOR)
@@ -421,7 +422,8 @@ def _rebuild(saved: SavedHybrid):
                   if v is not None}
     map_point = MapPoint(params=params, unconstrained={}, log_joint=m.get("log_joint", np.nan),
                          grad_norm=m.get("grad_norm", np.nan), converged=m.get("converged", True),
-                         n_steps=m.get("steps", 0), start={})
+                         n_steps=m.get("steps", 0), start={},
+                         polish_evaluations=m.get("polish_evaluations", 0))
     method = summary.get("diagnostics", {}).get("posterior", {}).get("method", "nuts")
     run = PosteriorRun(method, chains, betas, gammas, int(model.get("divergences", 0)))
     known = {f.name for f in fields(CollapsedSettings)}

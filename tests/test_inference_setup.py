@@ -57,11 +57,20 @@ def test_laplace_covariance_of_a_gaussian_potential_is_its_covariance():
         d = x - mean
         return 0.5 * d @ jnp.asarray(prec) @ d
 
-    got, ok = laplace_covariance(potential, jnp.asarray(mean))
+    got, ok = laplace_covariance(jax.jit(jax.value_and_grad(potential)), mean)
     assert bool(ok)
     np.testing.assert_allclose(got, cov, rtol=1e-9, atol=1e-12)
+    # curved: the finite differences against JAX's own Hessian (the gradient is exact)
+    def curved(x):
+        return jnp.sum(jnp.exp(0.3 * x) - 0.3 * x) + 0.1 * (x[0] * x[1]) ** 2 + x[2] ** 4
+
+    x = jnp.array([0.4, -1.2, 0.7])
+    got, ok = laplace_covariance(jax.jit(jax.value_and_grad(curved)), x)
+    assert bool(ok)
+    np.testing.assert_allclose(got, np.linalg.inv(jax.hessian(curved)(x)), rtol=1e-7, atol=1e-6)
     # a saddle (indefinite Hessian): NUTS's own start, the identity
-    got, ok = laplace_covariance(lambda x: x[0] ** 2 - x[1] ** 2, jnp.zeros(2))
+    saddle = jax.jit(jax.value_and_grad(lambda x: x[0] ** 2 - x[1] ** 2))
+    got, ok = laplace_covariance(saddle, jnp.zeros(2))
     assert not bool(ok)
     np.testing.assert_array_equal(got, np.eye(2))
 
@@ -222,7 +231,7 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
     np.testing.assert_array_equal(short["a2"], long["a2"][:, :100])
 
     x0 = ravel_pytree(start.unconstrained)[0]
-    cov, _ = ci.laplace_covariance(potential, x0)
+    cov, _ = ci.laplace_covariance(jax.jit(jax.value_and_grad(potential)), x0)
     mcmc = MCMC(NUTS(potential_fn=potential, dense_mass=True, inverse_mass_matrix=cov),
                 num_warmup=150, num_samples=100, num_chains=2, chain_method="sequential",
                 progress_bar=False)
