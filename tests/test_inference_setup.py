@@ -245,3 +245,24 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
     # a cap below the first draws is refused, in one line naming the settings
     with pytest.raises(FitError, match="num_samples=100, max_samples=50"):
         ci._nuts({}, start, replace(settings, max_samples=50), key, progress=False)
+
+
+def test_the_map_is_finished_by_a_root_find_where_lbfgs_stops_at_the_values_rounding():
+    """The 3-DOF recordings are precise and the potential ill-conditioned: L-BFGS-B's line
+    search stops with a gradient norm of 1e-3–1e-2, and the root find on the gradient ends
+    below the tolerance, at a minimum (a positive definite Hessian), not a saddle."""
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference import collapsed as ci
+    from bayeshopf.simulators.truth import flutter_experiment
+
+    rs, _ = flutter_experiment(seed=0, fast=True)
+    f = extract_harmonics(rs)
+    kw = ci.model_arguments(ci.build_spec(f, "subcritical"), f)
+    mp = ci.fit_map(kw)
+    assert mp.polish_evaluations > 0
+    assert mp.converged and mp.grad_norm < ci.MAP_GTOL
+    x = ravel_pytree({k: jnp.asarray(v) for k, v in mp.unconstrained.items()})[0]
+    value_and_grad = ci.potential_program(kw, x.shape[0])
+    assert float(value_and_grad(x)[0]) == pytest.approx(-mp.log_joint, abs=1e-9)
+    _, ok = ci.laplace_covariance(value_and_grad, x)
+    assert ok
