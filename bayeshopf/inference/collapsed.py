@@ -9,7 +9,8 @@ over a handful of parameters: the normal form's gaps (and the unfolding's ``w``)
    Nothing is random, so the answer does not depend on which start won.
 2. **MAP** by SciPy's L-BFGS-B from that point, in NumPyro's unconstrained
    space, on the compiled potential and gradient, until the gradient norm falls
-   below :data:`MAP_GTOL`; the final norm is reported.
+   below :data:`MAP_GTOL` (finished by a root find on the gradient where the
+   line search stops at the value's rounding); the final norm is reported.
 3. **Posterior.** ``"nuts"`` (default): NumPyro's NUTS kernel, ``num_chains``
    chains started at the MAP point with the mass matrix started at the MAP's
    Laplace covariance, advanced in compiled chunks and extended while R̂ or
@@ -249,10 +250,14 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     Three small compiled programs, each stored for the next process: the grid of
     starts (flat unconstrained vectors), the potential's value and gradient
     (:func:`potential_program`) and the constrained sites (:func:`constrain_program`).
-    The optimiser is SciPy's L-BFGS-B, driven from Python: a single compiled
-    program holding optax's L-BFGS and its zoom line search held four copies of
-    the potential and its gradient, and compiled in 8–10 s on the 3-DOF demo
-    against 2 s for one value and gradient.
+    The optimiser is SciPy's L-BFGS-B, driven from Python: the single compiled
+    program of optax's L-BFGS with its zoom line search held the potential and
+    its gradient several times over and compiled in 10.5 s on the 3-DOF demo,
+    against 2–2.5 s for one value and gradient. Where L-BFGS-B stops short of
+    :data:`MAP_GTOL` (its line search needs the value to fall, and on precise
+    data the value's rounding stops it), SciPy's root find on the gradient
+    (MINPACK's hybrd) finishes, and is kept only where it lowers the gradient
+    norm without raising the value.
     """
     ensure_x64()
     spec = kwargs["spec"]
@@ -363,7 +368,7 @@ def laplace_covariance(value_and_grad, x):
     The Hessian is SciPy's finite-difference Jacobian of the compiled gradient
     (:func:`scipy.differentiate.jacobian`: central differences of order 8 with
     Richardson extrapolation), made symmetric. ``jax.hessian`` of the collapsed
-    marginal (forward mode over its custom JVP rule) compiled in 5–6 s on the
+    marginal (forward mode over its custom JVP rule) compiled in 4–6 s on the
     3-DOF demo, as long as the rest of NUTS's start; the differences need no
     program besides the gradient, which the MAP compiled already.
 
