@@ -295,15 +295,15 @@ def fit_map(kwargs: dict, *, max_steps: int = 300) -> MapPoint:
     res = scipy.optimize.minimize(
         fun, grid[best], jac=True, method="L-BFGS-B",
         options={"maxiter": max_steps, "gtol": MAP_GTOL / np.sqrt(grid.shape[1]), "ftol": 0.0})
-    x, polish = np.asarray(res.x, dtype=float), 0
-    v, g = fun(x)
-    if not np.isfinite(v) or v == _NOT_FINITE:
+    x, v, g, polish = np.asarray(res.x, dtype=float), float(res.fun), np.asarray(res.jac), 0
+    if v == _NOT_FINITE:          # fun's stand-in for a value that is not finite
         raise FitError("MAP: the log density is not finite at the optimum")
     if np.linalg.norm(g) >= MAP_GTOL:
-        # where the data are precise the potential is ill-conditioned (condition ~1e9 on
-        # the 3-DOF demo) and L-BFGS-B's line search, which needs the value to fall,
-        # stops at the value's rounding with a gradient norm of 1e-3–1e-2; the gradient
-        # itself is still precise there, so a root find on it (MINPACK's hybrd) finishes
+        # on precise data (the 3-DOF demo) the value carries rounding noise of about 1e-8
+        # (the marginal's factorisation of an ill-conditioned matrix), so L-BFGS-B's line
+        # search, which needs the value to fall, stops once a step gains less: at a
+        # gradient norm of 4e-4–1e-2. The gradient is precise there (noise 6e-9), so a
+        # root find on it (MINPACK's hybrd) finishes
         root = scipy.optimize.root(lambda z: fun(z)[1], x, method="hybr")
         v_root, g_root = fun(np.asarray(root.x, dtype=float))
         if (np.linalg.norm(g_root) < np.linalg.norm(g)

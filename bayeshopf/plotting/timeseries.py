@@ -82,7 +82,11 @@ def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
         ax_i.set_title(f"{b.branch}, {mu_label} = {b.mu:g} {mu_units}".strip(),
                        fontsize=TITLE_SIZE)
         style_axes(ax_i)
-    axes[0].legend(fontsize=LEGEND_SIZE, loc="upper right")
+    if ax is None:     # below the panels, where it hides no crest
+        fig.legend(*axes[0].get_legend_handles_labels(), fontsize=LEGEND_SIZE, frameon=False,
+                   loc="outside lower center", ncol=3)
+    else:
+        axes[0].legend(fontsize=LEGEND_SIZE, loc="upper right")
     return fig
 
 

@@ -499,7 +499,9 @@ def bifurcation_diagram(system: System) -> BifurcationDiagram:
     return stored_diagram(system) or continue_from_hopf(system)
 
 
-def _orbit_on(branch: Branch, mu: float, n_points: int | None) -> PeriodicOrbit:
+def _orbit_on(branch: Branch, mu: float, n_points: int | None, *,
+              look_up: bool = True) -> PeriodicOrbit:
+    """The orbit at ``mu``: the stored one where there is one (``look_up``), else Newton's."""
     from bayeshopf.simulators.stored import stored_orbit
 
     system = branch.system
@@ -513,7 +515,7 @@ def _orbit_on(branch: Branch, mu: float, n_points: int | None) -> PeriodicOrbit:
             f"{hi:.4g}{' ' + u if u else ''}"
         )
     n_points = branch.orbits.shape[1] if n_points is None else n_points
-    stored = stored_orbit(system, branch, mu, n_points)
+    stored = stored_orbit(system, branch, mu, n_points) if look_up else None
     if stored is not None:       # the demo's orbits (bayeshopf.simulators.stored)
         return stored
     m = branch.mu

@@ -175,7 +175,7 @@ def _orbits_to_store(system: System) -> list[tuple[float, str, int]]:
 
 def write_stored(system: System, folder: Path = FOLDER) -> Path:
     """Compute ``system``'s diagram and demo orbits afresh and store them (atomically)."""
-    from bayeshopf.simulators.continuation import continue_from_hopf
+    from bayeshopf.simulators.continuation import _orbit_on, continue_from_hopf
 
     key = system_key(system)
     if key is None:
@@ -204,8 +204,9 @@ def write_stored(system: System, folder: Path = FOLDER) -> Path:
         out.update({f"branch{i}_amplitude_{c}": v for c, v in b.amplitude.items()})
         out.update({f"branch{i}_mean_{c}": v for c, v in b.mean.items()})
     for mu, branch, n_points in _orbits_to_store(system):
-        orbit = diagram.orbit_at(mu, branch, n_points=n_points)
-        name = _orbit_name(diagram.branch(branch), mu, orbit.states.shape[0])
+        on = diagram.branch(branch)
+        orbit = _orbit_on(on, mu, n_points, look_up=False)     # solved, never read back
+        name = _orbit_name(on, mu, orbit.states.shape[0])
         out.update({f"{name}_mu": np.array(orbit.mu), f"{name}_period": np.array(orbit.period),
                     f"{name}_x0": orbit.x0, f"{name}_states": orbit.states,
                     f"{name}_floquet": orbit.floquet, f"{name}_stable": np.array(orbit.stable)})
