@@ -37,6 +37,20 @@ def test_older_xla_gets_no_flag_it_does_not_know(monkeypatch):
     assert "fusion_emitters" not in os.environ["XLA_FLAGS"]
 
 
+def test_host_devices_are_asked_for_once_unless_the_user_chose(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr(cache, "_jaxlib_version", lambda: (0, 10))
+    assert cache.configure_xla_cpu() == [cache.SINGLE_THREAD_EIGEN, cache.CLASSIC_FUSION]
+    added = cache.configure_xla_cpu(host_devices=2)
+    assert added[-1] == f"{cache.HOST_DEVICES}=2"
+    cache.configure_xla_cpu(host_devices=2)
+    assert os.environ["XLA_FLAGS"].split().count(f"{cache.HOST_DEVICES}=2") == 1
+    monkeypatch.setenv("XLA_FLAGS", f"{cache.HOST_DEVICES}=8")
+    cache.configure_xla_cpu(host_devices=2)                        # the user's, kept
+    assert f"{cache.HOST_DEVICES}=8" in os.environ["XLA_FLAGS"].split()
+    assert f"{cache.HOST_DEVICES}=2" not in os.environ["XLA_FLAGS"]
+
+
 def test_blas_gets_one_thread_unless_the_user_chose(monkeypatch):
     monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
     cache.configure_xla_cpu()
@@ -245,6 +259,41 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
     # a cap below the first draws is refused, in one line naming the settings
     with pytest.raises(FitError, match="num_samples=100, max_samples=50"):
         ci._nuts({}, start, replace(settings, max_samples=50), key, progress=False)
+
+
+_SPREAD = """
+import os, sys
+os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=3"
+import numpy as np, pytest
+from dataclasses import replace
+import jax
+jax.config.update("jax_enable_x64", True)
+sys.path.insert(0, sys.argv[1])
+import test_inference_setup as t
+from bayeshopf.inference import collapsed as ci
+mp = pytest.MonkeyPatch()
+_, _, start = t._banana(mp)
+print(jax.local_device_count(), [ci.spread_devices(n) for n in (1, 2, 3, 4, 5, 6)])
+settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
+                   extend_samples=100, max_samples=100)
+key = jax.random.PRNGKey(5)
+spread, div, _ = ci._nuts({}, start, settings, key, progress=False)
+mp.setattr(ci, "spread_devices", lambda n: 1)
+one, div1, _ = ci._nuts({}, start, settings, key, progress=False)
+print(max(float(np.abs(spread[k] - one[k]).max()) for k in one), div == div1,
+      float(np.abs(spread["mu0"][0] - spread["mu0"][3]).max()))
+"""
+
+
+def test_chains_spread_over_devices_are_the_chains_of_one_device():
+    """With several CPU devices NUTS splits its chains between them (two devices of
+    two chains where there are three), and the draws are those of one device."""
+    out = subprocess.run([sys.executable, "-c", _SPREAD, os.path.dirname(__file__)],
+                         capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "3 [1, 2, 3, 2, 1, 3]"
+    diff, same_divergences, between_chains = out[1].split()
+    assert float(diff) == 0.0 and same_divergences == "True"
+    assert float(between_chains) > 0.1       # chains of their own keys, not copies
 
 
 def test_the_map_is_finished_by_a_root_find_where_lbfgs_stops_at_the_values_rounding():

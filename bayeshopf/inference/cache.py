@@ -54,6 +54,8 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
 SINGLE_THREAD_EIGEN = "--xla_cpu_multi_thread_eigen=false"
 #: XLA flag that compiles CPU fusions with the classic emitters (jaxlib ≥ 0.10).
 CLASSIC_FUSION = "--xla_cpu_use_fusion_emitters=false"
+#: XLA flag that makes the CPU appear as several devices.
+HOST_DEVICES = "--xla_force_host_platform_device_count"
 #: Threads of OpenBLAS, in whose scipy build XLA's CPU LAPACK kernels run.
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")
 
@@ -67,7 +69,7 @@ def _jaxlib_version() -> tuple[int, ...]:
         return (0,)
 
 
-def configure_xla_cpu() -> list[str]:
+def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     """Add the CPU flags below to ``XLA_FLAGS``, each unless the user set it.
 
     - :data:`SINGLE_THREAD_EIGEN`. With XLA's multithreaded Eigen pool, jaxlib
@@ -84,6 +86,12 @@ def configure_xla_cpu() -> list[str]:
       ``benchmarks/cli_speed_fusion_emitters.json`` against that commit's
       ``cli_speed.json``, both from one machine and session).
 
+    - With ``host_devices > 1``, :data:`HOST_DEVICES` ``=host_devices``: the CPU
+      appears as that many devices, and NUTS splits its chains between them
+      (:func:`~bayeshopf.inference.collapsed.spread_devices`). The CLI asks for
+      one per core it may use, up to four (the chains). With one thread per
+      computation (above), one device computes on one core at a time.
+
     It also sets ``OPENBLAS_NUM_THREADS=1`` (:data:`BLAS_THREADS`) unless the
     user set it. jaxlib's Cholesky factorisations and triangular solves on CPU
     call scipy's OpenBLAS, whose worker threads busy-wait between calls: on 2
@@ -96,6 +104,9 @@ def configure_xla_cpu() -> list[str]:
     Takes effect only before JAX's first computation in the process (the CLI and
     the test suite call it first).
 
+    Args:
+        host_devices: CPU devices wanted (1: JAX's default, no flag added).
+
     Returns:
         The flags of this function now in ``XLA_FLAGS``.
     """
@@ -104,6 +115,8 @@ def configure_xla_cpu() -> list[str]:
     wanted = [SINGLE_THREAD_EIGEN]
     if _jaxlib_version() >= (0, 10):
         wanted.append(CLASSIC_FUSION)
+    if host_devices > 1:
+        wanted.append(f"{HOST_DEVICES}={int(host_devices)}")
     for flag in wanted:
         if flag.split("=")[0] not in flags:
             flags = f"{flags} {flag}".strip()

@@ -37,6 +37,7 @@ import optax
 import scipy.differentiate
 import scipy.optimize
 from jax.flatten_util import ravel_pytree
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from numpyro.infer import NUTS, SVI, Predictive, Trace_ELBO, init_to_value
 from numpyro.infer.autoguide import AutoMultivariateNormal
 from numpyro.infer.util import initialize_model
@@ -405,6 +406,42 @@ def nuts_chunk(settings: CollapsedSettings) -> int:
     return math.gcd(settings.num_warmup, settings.num_samples, settings.extend_samples)
 
 
+def spread_devices(n: int) -> int:
+    """How many of this process's devices ``n`` independent items (chains, draws) are spread over.
+
+    The most devices that divide ``n``; 1 in a process with one CPU device,
+    JAX's default. The CLI asks for one host device per core
+    (:func:`~bayeshopf.inference.cache.configure_xla_cpu`'s ``host_devices``),
+    so that its four chains run two by two on two cores.
+    """
+    n_dev = jax.local_device_count()
+    return max(d for d in range(1, min(n_dev, n) + 1) if n % d == 0)
+
+
+def _spread(fn, n_dev: int):
+    """``fn`` over a leading axis split into ``n_dev`` blocks, one per device (``shard_map``).
+
+    ``fn`` must map a block of items to the outputs for those items, each with
+    the items on its leading axis; the blocks' outputs are put back in order.
+    With ``n_dev == 1`` this is ``fn``.
+    """
+    if n_dev == 1:
+        return fn
+    part = PartitionSpec("items")
+    return jax.shard_map(fn, mesh=_mesh(n_dev), in_specs=part, out_specs=part, check_vma=False)
+
+
+def _mesh(n_dev: int) -> Mesh:
+    return Mesh(np.array(jax.local_devices()[:n_dev]), ("items",))
+
+
+def _place(tree, n_dev: int):
+    """``tree`` split over ``n_dev`` devices along its leading axes, as ``_spread`` takes it."""
+    if n_dev == 1:
+        return tree
+    return jax.device_put(tree, NamedSharding(_mesh(n_dev), PartitionSpec("items")))
+
+
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
     """NumPyro's NUTS kernel from the MAP point, chains extended until they pass.
 
@@ -425,11 +462,16 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     ``extend_samples`` more. The draws are those of one longer run; only its
     length depends on the diagnostics.
 
-    The chains run one after another inside each call (``lax.map`` over them),
-    not vectorized: XLA's batched Cholesky and triangular solves are slow on CPU
-    (NUTS stage of the 3-DOF demo: 76 s vectorized, 43 s sequential); not
-    parallel either: one CPU device per chain (pmap) took 31 s on the rig's 2
-    cores against 13 s sequential.
+    On one device the chains run one after another inside each call
+    (``lax.map`` over them), not vectorized: XLA's batched Cholesky and
+    triangular solves are slow on CPU (NUTS stage of the 3-DOF demo: 76 s
+    vectorized, 43 s sequential). Where the process has several CPU devices
+    (:func:`spread_devices`), the chains are split between them
+    (``shard_map``), each device running its share one after another; the
+    draws are the same as on one device, as each chain's key and start are.
+    One device per chain on 2 cores (4 devices, pmap) took 31 s on the rig
+    against 13 s sequential; two devices of two chains each, 1.0–1.2 s per
+    250 iterations against 1.4–2.0 s (a probe, ``docs/inference_core.md``).
     """
     if not 1 <= settings.num_samples <= settings.max_samples or settings.extend_samples < 1:
         raise FitError("NUTS settings: expected 1 ≤ num_samples ≤ max_samples and "
@@ -438,6 +480,7 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
                        f"extend_samples={settings.extend_samples}")
     x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
     n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
+    n_dev = spread_devices(settings.num_chains)
     # everything the programs close over besides the model's data (inference.cache)
     key_ = (model_key(kwargs), x0, n_warm, settings.dense_mass, settings.target_accept,
             settings.max_tree_depth)
@@ -484,14 +527,16 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
                                 x.reshape(-1, x.shape[-1]))
             return leaves, draws, diverging, steps
 
-        return advance
+        return _spread(advance, n_dev)     # draws: chain by chain, as on one device
 
     keys = jax.random.split(key, settings.num_chains)
     # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
     cov, laplace = (laplace_covariance(potential_program(kwargs, x0.shape[0]), x0)
                     if settings.dense_mass else (np.eye(x0.shape[0]), False))
     leaves = compiled_call("nuts-start", make_start, (keys, jnp.asarray(cov)), key=key_)
-    advance = compiled_function("nuts-advance", make_advance, (leaves,), key=(key_, chunk))
+    leaves = _place(leaves, n_dev)
+    advance = compiled_function("nuts-advance", make_advance, (leaves,),
+                                key=(key_, chunk, n_dev))
     draws, diverging, steps = [], [], []
     done, wanted = 0, n_warm + settings.num_samples
     while True:
@@ -570,8 +615,10 @@ def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray
                                        kwargs["omega_se"], k_freq)
 
     # lax.map, not vmap: XLA's batched triangular solves hang on CPU
-    betas, gammas = compiled_call("maps", lambda: lambda th, keys: jax.lax.map(one, (th, keys)),
-                                  (th, keys), key=model_key(kwargs))
+    n_dev = spread_devices(n)
+    betas, gammas = compiled_call(
+        "maps", lambda: _spread(lambda th, keys: jax.lax.map(one, (th, keys)), n_dev),
+        _place((th, keys), n_dev), key=(model_key(kwargs), n_dev))
     return np.asarray(betas), np.asarray(gammas) if with_freq else None
 
 
