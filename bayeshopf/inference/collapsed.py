@@ -693,13 +693,13 @@ def compile_ahead(kwargs: dict, settings: CollapsedSettings) -> Future | None:
 
     Returns:
         A future that :func:`sample_posterior` waits on (``ahead=``), or ``None``
-        where there is nothing to gain: SVI; no persistent cache
+        where there is nothing to gain: SVI; one core; no persistent cache
         (:func:`~bayeshopf.inference.cache.enable_compilation_cache`); or a data
         set fitted before, whose MAP program is stored (its NUTS programs then
         load, and a thread loading them too only competed with the MAP: 0.5 s
         more MAP and 1.6 s more posterior stage on the rig, warm).
     """
-    if settings.inference != "nuts" or not cache_enabled():
+    if settings.inference != "nuts" or not cache_enabled() or _preload.available_cores() < 2:
         return None
     n_x = ravel_pytree(_initial_values(kwargs["spec"]))[0].shape[0]   # the MAP point's size
     if is_stored("value-and-grad", (jax.ShapeDtypeStruct((n_x,), jnp.float64),),
