@@ -792,11 +792,9 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     t0 = time.perf_counter()
     if progress:
         print(f"MAP ({criticality}): deterministic start and L-BFGS", file=sys.stderr)
-    ahead = ci.compile_ahead(kwargs, settings)    # NUTS's programs, beside the MAP
     map_point = ci.fit_map(kwargs, max_steps=settings.lbfgs_steps)
     timings["map"] = time.perf_counter() - t0
-    run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress,
-                              ahead=ahead)
+    run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress)
     timings["posterior"] = run.seconds
     post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
                            timings=timings)

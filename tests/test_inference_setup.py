@@ -296,63 +296,6 @@ def test_chains_spread_over_devices_are_the_chains_of_one_device():
     assert float(between_chains) > 0.1       # chains of their own keys, not copies
 
 
-_AHEAD = """
-import sys, threading
-import numpy as np, pytest
-from dataclasses import replace
-import jax
-jax.config.update("jax_enable_x64", True)
-sys.path.insert(0, sys.argv[1])
-import test_inference_setup as t
-from bayeshopf import _preload
-from bayeshopf.inference import cache, collapsed as ci
-cache.enable_compilation_cache(sys.argv[2])
-mp = pytest.MonkeyPatch()
-potential, unravel, start = t._banana(mp)
-mp.setattr(ci, "_initial_values", lambda spec: {"mu0": 0.0, "a2": 0.0})
-mp.setattr(ci, "_maps_program", lambda kw, args: (jax.jit(lambda th, keys: keys), 1))
-mp.setattr(_preload, "available_cores", lambda: 2)
-compiles, exports = [], []
-jax.monitoring.register_event_duration_secs_listener(
-    lambda name, secs, **kw: compiles.append((threading.current_thread().name, secs))
-    if name.endswith("backend_compile_duration") else None)
-load_or_export = cache._load_or_export
-mp.setattr(cache, "_load_or_export", lambda name, digest, make, args: load_or_export(
-    name, digest, lambda: exports.append((threading.current_thread().name, name)) or make(),
-    args))
-settings = replace(ci.CollapsedSettings(), num_chains=2, num_warmup=100, num_samples=100,
-                   extend_samples=100, max_samples=100)
-ahead = ci.compile_ahead({"spec": None}, settings)
-ahead.result()
-ahead_compile = max(s for n, s in compiles if n.startswith("bayeshopf-compile"))
-compiles.clear()
-ci._nuts({}, start, settings, jax.random.PRNGKey(0), progress=False)
-main = sorted(s for n, s in compiles if n == "MainThread")
-print(";".join(sorted(f"{t[:9]}:{n}" for t, n in exports)), ahead_compile,
-      main[-2] if len(main) > 1 else 0)
-ci.potential_program({}, 2)       # the data set's MAP program stored: nothing ahead
-print(ci.compile_ahead({"spec": None}, settings), ci.compile_ahead(
-    {"spec": None}, replace(settings, inference="svi")))
-"""
-
-
-def test_nuts_programs_compiled_ahead_are_the_ones_nuts_runs(tmp_path):
-    """compile_ahead traces and compiles NUTS's advance in its thread; NUTS then exports
-    only its start and loads the advance from the persistent cache (no compile as long
-    as the thread's); nothing is compiled ahead for a data set fitted before, or SVI."""
-    out = subprocess.run([sys.executable, "-c", _AHEAD, os.path.dirname(__file__),
-                          str(tmp_path)], capture_output=True, text=True, check=True)
-    first, second = out.stdout.strip().split("\n")[-2:]
-    exports, ahead_compile, main_second = first.split()
-    # the advance traced ahead; here the start and the potential (the MAP's, stored
-    # before NUTS in a fit), not the advance again
-    assert exports == ("MainThrea:nuts-start;MainThrea:value-and-grad;"
-                       "bayeshopf:nuts-advance")
-    # NUTS's start is compiled here; nothing else near the advance's compile time
-    assert float(main_second) < 0.3 * float(ahead_compile)
-    assert second == "None None"
-
-
 def test_the_map_is_finished_by_a_root_find_where_lbfgs_stops_at_the_values_rounding():
     """The 3-DOF recordings are precise and the potential ill-conditioned: L-BFGS-B's line
     search stops with a gradient norm of 4e-4 (seed 0, 8 s records), and the root find on

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -49,11 +48,6 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _ENABLED.append(str(target))
     return target
-
-
-def cache_enabled() -> bool:
-    """Whether :func:`enable_compilation_cache` turned the persistent cache on in this process."""
-    return bool(_ENABLED)
 
 
 #: XLA flag that keeps the CPU backend's Eigen work on one thread per computation.
@@ -198,8 +192,7 @@ def _digest(name: str, key, args) -> str:
             h.update(f"{a.dtype}{a.shape}".encode())
             h.update(np.ascontiguousarray(a).tobytes())
     for leaf in jax.tree_util.tree_leaves(args):   # the program takes any values of these
-        dtype = leaf.dtype if isinstance(leaf, jax.ShapeDtypeStruct) else np.result_type(leaf)
-        h.update(f"{dtype}{np.shape(leaf)}".encode())
+        h.update(f"{np.result_type(leaf)}{np.shape(leaf)}".encode())
     h.update(str(jax.tree_util.tree_structure((key, args))).encode())
     return h.hexdigest()[:40]
 
@@ -250,18 +243,6 @@ def compiled_function(name: str, make: Callable[[], Callable], args: tuple, key)
     return _COMPILED[name, digest]
 
 
-def is_stored(name: str, args: tuple, key) -> bool:
-    """Whether :func:`compiled_call` has a stored program for these arguments' shapes and key."""
-    if not _ENABLED:
-        return False
-    return (Path(_ENABLED[0]) / f"{STORED_PREFIX}{name}-{_digest(name, key, args)}.bin").is_file()
-
-
-#: Held while a program is traced for export: NumPyro's effect handlers live on one
-#: global stack, so a model is traced by one thread at a time
-#: (:func:`~bayeshopf.inference.collapsed.compile_ahead` traces beside the MAP).
-TRACE_LOCK = threading.RLock()
-
 #: The functions :func:`compiled_function` returned in this process, by name and digest.
 _COMPILED: dict[tuple[str, str], Callable] = {}
 
@@ -278,8 +259,7 @@ def _load_or_export(name: str, digest: str, make: Callable[[], Callable], args) 
         except Exception:  # noqa: BLE001 - a damaged or foreign file: export again
             exp = None
     if exp is None:
-        with TRACE_LOCK:     # NumPyro's handlers are global: one trace at a time
-            exp = jax.export.export(jax.jit(make()))(*args)
+        exp = jax.export.export(jax.jit(make()))(*args)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         try:
             tmp.write_bytes(exp.serialize())

@@ -28,7 +28,6 @@ import json
 import math
 import sys
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import jax
@@ -48,13 +47,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
-from bayeshopf.inference.cache import (
-    TRACE_LOCK,
-    cache_enabled,
-    compiled_call,
-    compiled_function,
-    is_stored,
-)
+from bayeshopf.inference.cache import compiled_call, compiled_function
 from bayeshopf.model import collapsed as cm
 
 #: Gradient norm (unconstrained space) below which the MAP counts as converged.
@@ -449,102 +442,6 @@ def _place(tree, n_dev: int):
     return jax.device_put(tree, NamedSharding(_mesh(n_dev), PartitionSpec("items")))
 
 
-def _nuts_programs(kwargs, settings: CollapsedSettings, n_x: int, x0=None):
-    """NUTS's two compiled programs for a model of ``n_x`` unconstrained parameters.
-
-    ``start(keys, cov)`` starts every chain at the MAP point ``x0`` (NumPyro's
-    ``init``, the mass matrix at ``cov``); ``advance(leaves)`` advances every
-    chain by :func:`nuts_chunk` iterations, warm-up or draws alike (the state
-    carries the iteration count and the adaptation), split between
-    :func:`spread_devices` devices. ``advance`` depends on neither the MAP
-    point nor the seed, so it can be compiled before the MAP is found
-    (:func:`compile_ahead`, with ``x0=None``: no ``start`` then). ``start``
-    holds ``x0`` as a constant: with ``x0`` an argument the chains' first
-    states differed by 1e-12 (XLA folds the constant's arithmetic otherwise),
-    and the chains from there on. Each is stored once per data set and
-    settings (:mod:`~bayeshopf.inference.cache`).
-
-    Returns:
-        ``(start, advance, n_dev, chunk, leaves)``: ``leaves``, the shapes (and
-        layout) of the chains' states that ``advance`` takes.
-    """
-    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
-    n_dev = spread_devices(settings.num_chains)
-    # everything the programs close over besides the model's data (inference.cache)
-    key_ = (model_key(kwargs), n_warm, settings.dense_mass, settings.target_accept,
-            settings.max_tree_depth)
-    z0 = jnp.zeros(n_x)
-
-    def kernel(potential, cov):
-        return NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
-                    inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
-                    max_tree_depth=settings.max_tree_depth)
-
-    def make_start(point):
-        def make():
-            _, _, potential = model_functions(kwargs)
-
-            def start(keys, cov):
-                nuts = kernel(potential, cov if settings.dense_mass else None)
-                states = jax.lax.map(lambda k: nuts.init(k, n_warm, init_params=point,
-                                                         model_args=(), model_kwargs={}), keys)
-                return jax.tree.leaves(states)
-
-            return start
-
-        return make
-
-    def make_advance():
-        info, unravel, potential = model_functions(kwargs)
-
-        def advance(leaves):
-            nuts = kernel(potential, None)
-            # init only configures the kernel (warm-up schedule, tree depth) and gives
-            # the state's structure; the states passed in carry the adapted mass matrix
-            tree = jax.tree.structure(nuts.init(jax.random.PRNGKey(0), n_warm, init_params=z0,
-                                                model_args=(), model_kwargs={}))
-
-            def chain(state_leaves):
-                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
-                    s = nuts.sample(s, (), {})
-                    return s, (s.z, s.diverging, s.num_steps)
-
-                state, out = jax.lax.scan(step, jax.tree.unflatten(tree, state_leaves), None,
-                                          length=chunk)
-                return jax.tree.leaves(state), out
-
-            leaves, (x, diverging, steps) = jax.lax.map(chain, leaves)
-            # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
-            # vmap: XLA's batched Cholesky is slow on CPU
-            draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
-                                x.reshape(-1, x.shape[-1]))
-            return leaves, draws, diverging, steps
-
-        return _spread(advance, n_dev)     # draws: chain by chain, as on one device
-
-    args = (jax.ShapeDtypeStruct((settings.num_chains, 2), jnp.uint32),
-            jax.ShapeDtypeStruct((n_x, n_x), z0.dtype))
-    if x0 is None:
-        start = None
-        with TRACE_LOCK:      # NumPyro's handlers: one trace at a time
-            shapes = jax.eval_shape(make_start(z0)(), *args)
-    else:
-        start = compiled_function("nuts-start", make_start(x0), args, key=(key_, x0))
-        shapes = jax.eval_shape(start, *args)
-    leaves = _placed_shapes(shapes, n_dev)
-    advance = compiled_function("nuts-advance", make_advance, (leaves,),
-                                key=(key_, chunk, n_dev))
-    return start, advance, n_dev, chunk, leaves
-
-
-def _placed_shapes(tree, n_dev: int):
-    """Shapes of ``tree`` as :func:`_place` lays its arrays out (for compiling ahead)."""
-    if n_dev == 1:
-        return jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype), tree)
-    part = NamedSharding(_mesh(n_dev), PartitionSpec("items"))
-    return jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=part), tree)
-
-
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
     """NumPyro's NUTS kernel from the MAP point, chains extended until they pass.
 
@@ -554,12 +451,11 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     38.0 leapfrog steps per warm-up iteration against 15.5 from the Laplace
     covariance (seed 0, 4 × (500 + 500); ``benchmarks/nuts_start.json``).
 
-    Two compiled programs (:func:`_nuts_programs`) besides the gradient the
-    Laplace covariance differences (:func:`laplace_covariance`): one starts
-    every chain (NumPyro's ``init`` with that covariance); the other advances
-    every chain by :func:`nuts_chunk` iterations, warm-up or draws alike (the
-    state carries the iteration count and the adaptation), and is called again
-    and again. After ``num_warmup``
+    Two compiled programs besides the gradient the Laplace covariance
+    differences (:func:`laplace_covariance`): one starts every chain (NumPyro's
+    ``init`` with that covariance); the other advances every chain by :func:`nuts_chunk`
+    iterations, warm-up or draws alike (the state carries the iteration count
+    and the adaptation), and is called again and again. After ``num_warmup``
     warm-up iterations and ``num_samples`` draws per chain, R̂ and bulk ESS of
     the :data:`CHECKED` sites (:func:`convergence`) decide: while one fails and
     fewer than ``max_samples`` draws per chain exist, every chain gets
@@ -583,12 +479,64 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
                        f"max_samples={settings.max_samples}, "
                        f"extend_samples={settings.extend_samples}")
     x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
-    n_warm = settings.num_warmup
-    start, advance, n_dev, chunk, _ = _nuts_programs(kwargs, settings, x0.shape[0], x0)
+    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
+    n_dev = spread_devices(settings.num_chains)
+    # everything the programs close over besides the model's data (inference.cache)
+    key_ = (model_key(kwargs), x0, n_warm, settings.dense_mass, settings.target_accept,
+            settings.max_tree_depth)
+
+    def kernel(potential, cov):
+        return NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
+                    inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
+                    max_tree_depth=settings.max_tree_depth)
+
+    def make_start():
+        _, _, potential = model_functions(kwargs)
+
+        def start(keys, cov):
+            nuts = kernel(potential, cov if settings.dense_mass else None)
+            states = jax.lax.map(lambda k: nuts.init(k, n_warm, init_params=x0, model_args=(),
+                                                     model_kwargs={}), keys)
+            return jax.tree.leaves(states)
+
+        return start
+
+    def make_advance():
+        info, unravel, potential = model_functions(kwargs)
+
+        def advance(leaves):
+            nuts = kernel(potential, None)
+            # init only configures the kernel (warm-up schedule, tree depth) and gives
+            # the state's structure; the states passed in carry the adapted mass matrix
+            tree = jax.tree.structure(nuts.init(jax.random.PRNGKey(0), n_warm, init_params=x0,
+                                                model_args=(), model_kwargs={}))
+
+            def chain(state_leaves):
+                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+                    s = nuts.sample(s, (), {})
+                    return s, (s.z, s.diverging, s.num_steps)
+
+                state, out = jax.lax.scan(step, jax.tree.unflatten(tree, state_leaves), None,
+                                          length=chunk)
+                return jax.tree.leaves(state), out
+
+            leaves, (x, diverging, steps) = jax.lax.map(chain, leaves)
+            # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
+            # vmap: XLA's batched Cholesky is slow on CPU
+            draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
+                                x.reshape(-1, x.shape[-1]))
+            return leaves, draws, diverging, steps
+
+        return _spread(advance, n_dev)     # draws: chain by chain, as on one device
+
     keys = jax.random.split(key, settings.num_chains)
+    # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
     cov, laplace = (laplace_covariance(potential_program(kwargs, x0.shape[0]), x0)
                     if settings.dense_mass else (np.eye(x0.shape[0]), False))
-    leaves = _place(start(keys, jnp.asarray(cov)), n_dev)
+    leaves = compiled_call("nuts-start", make_start, (keys, jnp.asarray(cov)), key=key_)
+    leaves = _place(leaves, n_dev)
+    advance = compiled_function("nuts-advance", make_advance, (leaves,),
+                                key=(key_, chunk, n_dev))
     draws, diverging, steps = [], [], []
     done, wanted = 0, n_warm + settings.num_samples
     while True:
@@ -645,9 +593,15 @@ def elbo_plateau(losses: np.ndarray, frac: float = 0.1) -> dict:
     return {"drop": diff, "se": se, "plateau": bool(diff < 2 * se)}
 
 
-def _maps_program(kwargs, args):
-    """The compiled ``(θ draws, keys) ↦ (β, γ)`` of :func:`_sample_maps` for arguments ``args``."""
-    spec = kwargs["spec"]
+def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray | None]:
+    """One exact draw of the map's (and the frequency's) coefficients per posterior draw.
+
+    Returns:
+        ``β`` ``(n, J, 2)`` and ``γ`` ``(n, 4)`` (``None`` without the frequency model).
+    """
+    n = len(next(iter(theta.values())))
+    keys = jax.random.split(key, n)
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
     with_freq = spec.omega_centre is not None
 
     def one(a):
@@ -661,66 +615,11 @@ def _maps_program(kwargs, args):
                                        kwargs["omega_se"], k_freq)
 
     # lax.map, not vmap: XLA's batched triangular solves hang on CPU
-    n_dev = spread_devices(args[1].shape[0])
-    return compiled_function(
+    n_dev = spread_devices(n)
+    betas, gammas = compiled_call(
         "maps", lambda: _spread(lambda th, keys: jax.lax.map(one, (th, keys)), n_dev),
-        args, key=(model_key(kwargs), n_dev)), n_dev
-
-
-def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray | None]:
-    """One exact draw of the map's (and the frequency's) coefficients per posterior draw.
-
-    Returns:
-        ``β`` ``(n, J, 2)`` and ``γ`` ``(n, 4)`` (``None`` without the frequency model).
-    """
-    n = len(next(iter(theta.values())))
-    args = ({k: jnp.asarray(v) for k, v in theta.items()}, jax.random.split(key, n))
-    maps, n_dev = _maps_program(kwargs, args)
-    betas, gammas = maps(*_place(args, n_dev))
-    return np.asarray(betas), np.asarray(gammas) if spec.omega_centre is not None else None
-
-
-def compile_ahead(kwargs: dict, settings: CollapsedSettings) -> Future | None:
-    """Compile the posterior stage's programs in a thread, while the MAP runs.
-
-    NUTS's advance (:func:`_nuts_programs`) and the map draws
-    (:func:`_sample_maps`, for ``num_chains × num_samples`` draws) depend on the
-    data and the settings, not on the MAP point: they are traced, stored and
-    compiled (into JAX's persistent cache) beside the MAP's own, on a second
-    core, and :func:`sample_posterior` loads them. With an empty cache, the rig's
-    fit compiled them for 6–7 s after its MAP (4.9 s and 1.5–1.7 s of XLA's
-    backend). NUTS's start holds the MAP point and is compiled after it.
-
-    Returns:
-        A future that :func:`sample_posterior` waits on (``ahead=``), or ``None``
-        where there is nothing to gain: SVI; one core; no persistent cache
-        (:func:`~bayeshopf.inference.cache.enable_compilation_cache`); or a data
-        set fitted before, whose MAP program is stored (its NUTS programs then
-        load, and a thread loading them too only competed with the MAP: 0.5 s
-        more MAP and 1.6 s more posterior stage on the rig, warm).
-    """
-    if settings.inference != "nuts" or not cache_enabled() or _preload.available_cores() < 2:
-        return None
-    n_x = ravel_pytree(_initial_values(kwargs["spec"]))[0].shape[0]   # the MAP point's size
-    if is_stored("value-and-grad", (jax.ShapeDtypeStruct((n_x,), jnp.float64),),
-                 model_key(kwargs)):
-        return None     # fitted before: its programs load (a thread would only compete)
-
-    def work():
-        _, advance, _, _, leaves = _nuts_programs(kwargs, settings, n_x)
-        advance.lower(leaves).compile()
-        draws = jax.eval_shape(advance, leaves)[1]
-        n = settings.num_chains * settings.num_samples
-        args = ({k: jax.ShapeDtypeStruct((n,) + v.shape[1:], v.dtype) for k, v in draws.items()
-                 if not k.startswith("marginal")},
-                jax.ShapeDtypeStruct((n, 2), jnp.uint32))
-        maps, n_maps = _maps_program(kwargs, args)
-        maps.lower(*_placed_shapes(args, n_maps)).compile()
-
-    pool = ThreadPoolExecutor(1, thread_name_prefix="bayeshopf-compile")
-    future = pool.submit(work)
-    pool.shutdown(wait=False)
-    return future
+        _place((th, keys), n_dev), key=(model_key(kwargs), n_dev))
+    return np.asarray(betas), np.asarray(gammas) if with_freq else None
 
 
 def convergence(chains: dict) -> dict:
@@ -768,12 +667,9 @@ class PosteriorRun:
 
 
 def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSettings, *,
-                     seed: int = 0, progress: bool = True, method: str | None = None,
-                     ahead: Future | None = None) -> PosteriorRun:
-    """NUTS or SVI from the MAP point, then one exact map draw per posterior draw.
-
-    ``ahead``: the programs :func:`compile_ahead` is compiling, waited for first.
-    """
+                     seed: int = 0, progress: bool = True, method: str | None = None
+                     ) -> PosteriorRun:
+    """NUTS or SVI from the MAP point, then one exact map draw per posterior draw."""
     ensure_x64()
     method = method or settings.inference
     if method not in ("nuts", "svi"):
@@ -785,8 +681,6 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
                 f"steps, up to {settings.max_samples} draws while R̂ or ESS fails"
                 if method == "nuts" else f"{settings.svi_steps} steps")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
-    if ahead is not None:
-        ahead.result()     # its programs, compiled beside the MAP
     sampler = {}
     _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while the sampler runs
     if method == "nuts":
