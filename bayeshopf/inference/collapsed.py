@@ -448,7 +448,7 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     The mass matrix starts at the MAP's Laplace covariance (the inverse Hessian
     of the potential there) and is adapted from it. From the identity, the
     windowed adaptation spends its first windows on deep trees: on the 3-DOF demo
-    38.0 leapfrog steps per warm-up iteration against 15.5 from the Laplace
+    35.8 leapfrog steps per warm-up iteration against 14.6 from the Laplace
     covariance (seed 0, 4 × (500 + 500); ``benchmarks/nuts_start.json``).
 
     Two compiled programs besides the gradient the Laplace covariance
