@@ -51,6 +51,20 @@ def test_host_devices_are_asked_for_once_unless_the_user_chose(monkeypatch):
     assert f"{cache.HOST_DEVICES}=2" not in os.environ["XLA_FLAGS"]
 
 
+@pytest.mark.parametrize("cores, wanted", [(1, None), (2, 2), (8, 4)])
+def test_the_cli_asks_for_a_device_per_core_up_to_the_chains(monkeypatch, tmp_path, cores,
+                                                            wanted):
+    from bayeshopf import _preload
+    from bayeshopf.cli.main import main
+
+    monkeypatch.setenv("XLA_FLAGS", "")
+    monkeypatch.setattr(_preload, "available_cores", lambda: cores)
+    # any command sets the flags first; this one then stops at its first check
+    assert main(["predict", str(tmp_path), "--mu", "15", "--ci", "2"]) != 0
+    found = [f for f in os.environ["XLA_FLAGS"].split() if f.startswith(cache.HOST_DEVICES)]
+    assert found == ([] if wanted is None else [f"{cache.HOST_DEVICES}={wanted}"])
+
+
 def test_blas_gets_one_thread_unless_the_user_chose(monkeypatch):
     monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
     cache.configure_xla_cpu()
