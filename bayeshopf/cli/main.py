@@ -531,10 +531,11 @@ def main(argv: list[str] | None = None) -> int:
         from bayeshopf._preload import available_cores
         from bayeshopf._x64 import ensure_x64
         from bayeshopf.inference.cache import configure_xla_cpu, enable_compilation_cache
+        from bayeshopf.inference.collapsed import CollapsedSettings
 
         # before any JAX work (bayeshopf.inference.cache); a CPU device per core, up
-        # to the four chains of NUTS, which run two by two on two cores
-        configure_xla_cpu(host_devices=min(available_cores(), 4))
+        # to NUTS's chains, which then run two by two on two cores
+        configure_xla_cpu(host_devices=min(available_cores(), CollapsedSettings.num_chains))
         enable_compilation_cache()  # before any JAX work, so every compilation is cached
         ensure_x64()                # bayeshopf computes in float64
         return COMMANDS[args.command](args)
