@@ -479,3 +479,34 @@ def test_plot_all_vector_without_recordings(fitted, tmp_path) -> None:
     assert all(p.stat().st_size > 5_000 for p in paths)
     text = paths[0].read_text()
     assert 'id="unstable-median"' in text and 'id="stable-p-exists"' in text
+
+
+def test_time_series_legend_keys_show_each_branch_colour(fitted) -> None:
+    """The band's and the median's keys carry the colours of the branches drawn, no other."""
+    import matplotlib.colors as mcolors
+
+    from bayeshopf.plotting import plot_time_series
+    from bayeshopf.plotting._style import BRANCH_COLOURS
+
+    bands = fitted["fit"].time_series_bands(fitted["rs"])
+    assert {b.branch for b in bands} == {"stable", "unstable"}
+
+    def key_colours(fig):
+        (leg,) = fig.legends
+        assert [t.get_text() for t in leg.get_texts()] == ["measured", "90% band",
+                                                           "posterior median"]
+        # HandlerTuple draws each key's artists into the legend's handle box
+        box = leg.get_children()[0].get_children()[1]   # VPacker of (key, label) rows
+        rows = [r.get_children()[0] for c in box.get_children() for r in c.get_children()]
+        cols = []
+        for area in rows:
+            arts = area.get_children()
+            cols.append({mcolors.to_hex(a.get_facecolor() if hasattr(a, "get_height")
+                                        else a.get_color()) for a in arts})
+        return cols
+
+    both = key_colours(plot_time_series(bands))
+    hexes = {k: mcolors.to_hex(v) for k, v in BRANCH_COLOURS.items()}
+    assert both[1] == both[2] == {hexes["stable"], hexes["unstable"]}
+    stable_only = key_colours(plot_time_series([b for b in bands if b.branch == "stable"]))
+    assert stable_only[1] == stable_only[2] == {hexes["stable"]}

@@ -6,6 +6,9 @@ import math
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerTuple
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from bayeshopf.plotting._style import (
     BRANCH_COLOURS,
@@ -82,11 +85,19 @@ def plot_time_series(bands, *, mu_label: str = "mu", mu_units: str = "",
         ax_i.set_title(f"{b.branch}, {mu_label} = {b.mu:g} {mu_units}".strip(),
                        fontsize=TITLE_SIZE)
         style_axes(ax_i)
+    # one key per artist, in every branch colour the panels use (stable blue, unstable red)
+    colours = [BRANCH_COLOURS[k] for k in ("stable", "unstable")
+               if any(b.branch == k for b in bands)]
+    handles = [Line2D([], [], color=MEASURED_GREY, lw=1.0),
+               tuple(Patch(color=c, alpha=0.3, lw=0) for c in colours),
+               tuple(Line2D([], [], color=c, lw=1.0, ls="--") for c in colours)]
+    labels = ["measured", f"{ci_label(ci)} band", "posterior median"]
+    kw = dict(fontsize=LEGEND_SIZE, handlelength=3.0,
+              handler_map={tuple: HandlerTuple(ndivide=None, pad=0.3)})
     if ax is None:     # below the panels, where it hides no crest
-        fig.legend(*axes[0].get_legend_handles_labels(), fontsize=LEGEND_SIZE, frameon=False,
-                   loc="outside lower center", ncol=3)
+        fig.legend(handles, labels, frameon=False, loc="outside lower center", ncol=3, **kw)
     else:
-        axes[0].legend(fontsize=LEGEND_SIZE, loc="upper right")
+        axes[0].legend(handles, labels, loc="upper right", **kw)
     return fig
 
 
