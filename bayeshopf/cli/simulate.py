@@ -124,9 +124,8 @@ def run(args) -> int:
 def _run_effect(args, system, offsets, out: Path) -> int:
     """``--effect``: recordings with a hidden effect; the truth only in ``--truth-out``."""
     import json
-    import os
-    import uuid
 
+    from bayeshopf._atomic import replacing
     from bayeshopf.discrepancy.effects import simulate_with_effect, truth_points
     from bayeshopf.errors import OutputError
     from bayeshopf.simulators import SimulationError, write_simulation
@@ -154,10 +153,8 @@ def _run_effect(args, system, offsets, out: Path) -> int:
         truth.update(truth_points(system, args.effect, args.effect_value))
         truth.update(offsets=offsets, noise=args.noise, seed=args.seed,
                      recordings=[{"name": r.name, "mu": r.mu, "branch": r.branch} for r in rs])
-        tmp = truth_path.parent / f".{truth_path.name}.{uuid.uuid4().hex[:8]}"
-        truth_path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, truth_path)
+        with replacing(truth_path) as tmp:
+            tmp.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
     print(f"wrote {out}/ ({len(rs)} recordings of {', '.join(system.observed)} with a hidden "
           f"effect, {args.duration:g} s at {args.rate:g} Hz, {100 * args.noise:g}% noise)"
           + (f"; the truth is in {truth_path}" if truth_path else "; the truth is not written"))

@@ -16,12 +16,13 @@ its chains (:func:`bayeshopf._preload.start`).
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from bayeshopf._atomic import replacing
 
 if TYPE_CHECKING:
     import arviz as az
@@ -38,14 +39,8 @@ def arviz():
 def write_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:
     """Write ``idata`` to ``path`` atomically (a temporary file, then a rename)."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with replacing(path) as tmp:
         idata.to_netcdf(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 

@@ -11,6 +11,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from bayeshopf._atomic import replacing
+
 _ENABLED: list[str] = []
 
 
@@ -260,11 +262,7 @@ def _load_or_export(name: str, digest: str, make: Callable[[], Callable], args) 
             exp = None
     if exp is None:
         exp = jax.export.export(jax.jit(make()))(*args)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        try:
+        # a read-only cache: the call still works
+        with contextlib.suppress(OSError), replacing(path) as tmp:
             tmp.write_bytes(exp.serialize())
-            os.replace(tmp, path)
-        except OSError:    # a read-only cache: the call still works
-            with contextlib.suppress(OSError):
-                tmp.unlink()
     return jax.jit(exp.call)

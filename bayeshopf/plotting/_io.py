@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
-import secrets
 import sys
 from pathlib import Path
 
 from matplotlib.figure import Figure
+
+from bayeshopf._atomic import replacing
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 150) -> Path:
@@ -30,19 +30,10 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 150) -> Pa
         The destination path.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     fmt = path.suffix.lstrip(".").lower() or "png"
-    # A fresh name opened exclusively ("xb") rather than tempfile.mkstemp, so that
-    # the file gets the usual permissions (0o666 less the umask), not 0o600.
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(8)}.tmp"
     try:
-        with open(tmp, "xb") as fh:
+        with replacing(path) as tmp, open(tmp, "xb") as fh:
             fig.savefig(fh, format=fmt, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
     finally:
         _close(fig)
     return path
