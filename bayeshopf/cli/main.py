@@ -531,10 +531,15 @@ def main(argv: list[str] | None = None) -> int:
         from bayeshopf._preload import available_cores
         from bayeshopf._x64 import ensure_x64
         from bayeshopf.inference.cache import configure_xla_cpu, enable_compilation_cache
+
+        # before anything loads SciPy's OpenBLAS (importing the inference core
+        # does): one BLAS thread, whose busy-waiting workers would otherwise take
+        # the cores from NUTS's devices (bayeshopf.inference.cache)
+        configure_xla_cpu()
         from bayeshopf.inference.collapsed import CollapsedSettings
 
-        # before any JAX work (bayeshopf.inference.cache); a CPU device per core, up
-        # to NUTS's chains, which then run two by two on two cores
+        # before any JAX work: a CPU device per core, up to NUTS's chains, which
+        # then run two by two on two cores
         configure_xla_cpu(host_devices=min(available_cores(), CollapsedSettings.num_chains))
         enable_compilation_cache()  # before any JAX work, so every compilation is cached
         ensure_x64()                # bayeshopf computes in float64
