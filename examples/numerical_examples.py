@@ -17,6 +17,7 @@ the convergence checks then usually warn).
 
 from __future__ import annotations
 
+# ruff: noqa: E402  (configure_xla_cpu runs before the imports that load SciPy and JAX)
 import argparse
 import os
 import sys
@@ -24,8 +25,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import bayeshopf as bh
 from bayeshopf.inference.cache import configure_xla_cpu
+
+# before the other imports, as the CLI does: SciPy's OpenBLAS (loaded with them)
+# reads its thread limit once, and JAX's CPU flags apply before its first work
+configure_xla_cpu()
+
+import bayeshopf as bh
 from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import plot_phase_portraits, save_figure
 from bayeshopf.plotting.truth import plot_diagram_vs_truth
@@ -104,7 +110,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", nargs="?", default=None, help="output folder (default: temporary)")
     ap.add_argument("--system", choices=("vanderpol", "flutter3dof", "both"), default="both")
     args = ap.parse_args(argv)
-    configure_xla_cpu()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bayeshopf-section4-"))
     out.mkdir(parents=True, exist_ok=True)
     settings = CollapsedSettings.fast() if FAST else CollapsedSettings()

@@ -16,6 +16,7 @@ checks then usually warn).
 
 from __future__ import annotations
 
+# ruff: noqa: E402  (configure_xla_cpu runs before the imports that load SciPy and JAX)
 import os
 import sys
 import tempfile
@@ -23,10 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
+from bayeshopf.inference.cache import configure_xla_cpu
+
+# before the other imports, as the CLI does: SciPy's OpenBLAS (loaded with them)
+# reads its thread limit once, and JAX's CPU flags apply before its first work
+configure_xla_cpu()
+
 import bayeshopf as bh
 from bayeshopf.data.synthetic import demo_system
 from bayeshopf.diagnostics.summaries import interval
-from bayeshopf.inference.cache import configure_xla_cpu
 from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.plotting import plot_all
 from bayeshopf.posterior import fit_hybrid
@@ -37,7 +43,6 @@ NEW_MU = 17.0
 
 
 def main(argv: list[str]) -> int:
-    configure_xla_cpu()  # before any JAX work, as the CLI does (bayeshopf.inference.cache)
     out = Path(argv[1]) if len(argv) > 1 else Path(tempfile.mkdtemp(prefix="bayeshopf-quickstart-"))
 
     # 1. Recordings: 4 stable and 3 unstable LCOs of a system whose truth we know.
