@@ -31,7 +31,13 @@ import os
 import sys
 from pathlib import Path
 
-import jax
+from bayeshopf.inference.cache import configure_xla_cpu
+
+# before the other imports, as the CLI does: SciPy's OpenBLAS (loaded with them)
+# reads its thread limit once, and JAX's CPU flags apply before its first work
+configure_xla_cpu()
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 

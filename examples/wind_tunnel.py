@@ -18,11 +18,18 @@ temporary folder). ``BAYESHOPF_FAST=1`` runs short fits and two folds only.
 
 from __future__ import annotations
 
+# ruff: noqa: E402  (configure_xla_cpu runs before the imports that load SciPy and JAX)
 import json
 import os
 import sys
 import tempfile
 from pathlib import Path
+
+from bayeshopf.inference.cache import configure_xla_cpu
+
+# before the other imports, as the CLI does: SciPy's OpenBLAS (loaded with them)
+# reads its thread limit once, and JAX's CPU flags apply before its first work
+configure_xla_cpu()
 
 from bayeshopf.datasets import flutter_cbc
 from bayeshopf.diagnostics.pair_invariant import (
