@@ -11,8 +11,10 @@ rig run). The term enters the predictions only, so one refit per held-out
 recording (default settings, seed 0, the full data's frame) serves every ``S``.
 
 1. **The trade-off.** For ``S`` from 0.05 to 0.6, the number of the 7 held-out
-   amplitudes inside their 90% predictive bands and the bands' mean width, with
-   the package's own predictive (``S`` set on the module for the call). It shows
+   amplitudes inside their 90% predictive bands and the bands' mean width.
+   ``_band`` repeats ``HybridPosterior.amplitude(predictive=True)`` with the
+   scale's draws as an argument; at the package's ``S = 0.1`` it must give the
+   package's own band (``package_band`` in the JSON; equal in all 7 folds). It shows
    which ``S`` the bar (6/7 with a mean width at most twice the legacy core's
    13.6 mm) admits; choosing ``S`` from this table would be choosing it on the
    held-out recordings, so it is a map of the problem, not a setting.

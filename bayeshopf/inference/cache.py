@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -100,8 +102,12 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     cores the NUTS stage of the rig used two cores' CPU time for the wall time
     of one, and the second core was not free for anything else
     (``benchmarks/bench_xla_cpu_settings.py``). The matrices here are far too
-    small to gain from threads. That library is loaded at JAX's first
-    linear-algebra call, so this must come before it.
+    small to gain from threads. OpenBLAS reads the limit once, when it loads,
+    and it loads with SciPy's linear algebra, which importing bayeshopf's
+    inference core imports: call this before those imports. Called after them,
+    it warns (RuntimeWarning) that the limit cannot take effect; on 2 cores the
+    busy-waiting threads made the CLI's NUTS stage 2–3 times slower with two
+    devices (``docs/inference_core.md``, "Stop 38").
 
     Takes effect only before JAX's first computation in the process (the CLI and
     the test suite call it first).
@@ -112,6 +118,11 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     Returns:
         The flags of this function now in ``XLA_FLAGS``.
     """
+    if BLAS_THREADS[0] not in os.environ and "scipy.linalg" in sys.modules:
+        warnings.warn("configure_xla_cpu: SciPy's OpenBLAS was loaded before "
+                      f"{BLAS_THREADS[0]}={BLAS_THREADS[1]} could be set, so its threads are not "
+                      "limited; call configure_xla_cpu() before importing the rest of "
+                      "bayeshopf (in a notebook, in the first cell)", RuntimeWarning, stacklevel=2)
     os.environ.setdefault(*BLAS_THREADS)
     flags = os.environ.get("XLA_FLAGS", "")
     wanted = [SINGLE_THREAD_EIGEN]
