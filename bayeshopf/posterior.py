@@ -37,7 +37,7 @@ from bayeshopf.features.harmonics import (
     time_design,
 )
 from bayeshopf.inference import collapsed as ci
-from bayeshopf.inference.cache import compiled_call, enable_compilation_cache, release_compiled
+from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
@@ -376,12 +376,27 @@ class HybridPosterior:
         (:func:`~bayeshopf.model.collapsed.pointwise_log_likelihood`): given θ
         the map is refitted exactly without recording i.
         """
-        chains = self.run.chains
-        shape = next(iter(chains.values())).shape[:2]
-        theta = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()
-                 if k in self.map_point.params}
-        ll = log_likelihood_draws(self.spec, theta, self.features)
+        shape = next(iter(self.run.chains.values())).shape[:2]
+        ll = np.asarray(self._log_likelihood_dispatched)
         return ll.reshape(shape + (self.features.n_recordings,))
+
+    @cached_property
+    def _log_likelihood_dispatched(self):
+        """:attr:`log_likelihood`'s draws as JAX's asynchronous dispatch returns them."""
+        theta = {k: v.reshape((-1,) + v.shape[2:]) for k, v in self.run.chains.items()
+                 if k in self.map_point.params}
+        return _log_likelihood_program(self.spec, theta, self.features)
+
+    def dispatch(self) -> None:
+        """Start the computation :meth:`to_inference_data` waits longest for, and return.
+
+        JAX runs a compiled program on its own threads and returns at once
+        (asynchronous dispatch): the pointwise log-likelihood of every draw
+        (about 1 s on the rig) then runs beside what Python does next, the
+        figures in the CLI, and :attr:`log_likelihood` collects it.
+        """
+        if "log_likelihood" not in self.__dict__:
+            self._log_likelihood_dispatched  # noqa: B018 (dispatches)
 
     def to_inference_data(self):
         """The fit as ArviZ :class:`~arviz.InferenceData` (ArviZ 0.x; see below).
@@ -759,6 +774,11 @@ def log_likelihood_draws(spec: cm.CollapsedSpec, theta: dict,
     leave-one-out refit): the map is then conditioned on the others only.
     ``nan`` where a draw has no LCO on a recording's branch.
     """
+    return np.asarray(_log_likelihood_program(spec, theta, features))
+
+
+def _log_likelihood_program(spec: cm.CollapsedSpec, theta: dict, features: HarmonicFeatures):
+    """:func:`log_likelihood_draws` as a JAX array, dispatched and not waited for."""
     kw = ci.model_arguments(spec, features)
     th = {k: jnp.asarray(v) for k, v in theta.items()}
 
@@ -766,8 +786,7 @@ def log_likelihood_draws(spec: cm.CollapsedSpec, theta: dict,
         return cm.pointwise_log_likelihood(spec, t, kw["mu"], kw["sign"], kw["coeffs"],
                                            kw["coeffs_se"], kw["omega"], kw["omega_se"])
 
-    return np.asarray(compiled_call("loglik", lambda: lambda th: jax.lax.map(one, th), (th,),
-                                    key=ci.model_key(kw)))
+    return ci.mapped_call("loglik", one, th, key=ci.model_key(kw))
 
 
 def _features(recordings: RecordingSet | HarmonicFeatures, settings: ci.CollapsedSettings

@@ -220,9 +220,9 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         The output folder.
     """
     def write(stage: Path) -> None:
-        nonlocal post
-        post = replace(post, timings={**post.timings, **_draw_figures(figures, stage)})
-        _write_json(summary_hybrid(post, ppc, extra_summary, ci), stage / SUMMARY)
+        post.dispatch()     # posterior.nc's log-likelihood computes beside the figures
+        timed = replace(post, timings={**post.timings, **_draw_figures(figures, stage)})
+        _write_json(summary_hybrid(timed, ppc, extra_summary, ci), stage / SUMMARY)
         mp = post.map_point
         model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
                  "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),

@@ -135,6 +135,19 @@ def test_fit_auto_compares_both_normal_forms_by_exact_conditional_loo(planted):
     n_chains, n_draws = post.run.chains["mu0"].shape
     assert ll.shape == (n_chains, n_draws, post.features.n_recordings)
     assert np.isfinite(ll).all()
+    # dispatched early (the CLI's figures run beside it); chain 1's draw 3 is the
+    # model's own pointwise log-likelihood at that draw
+    from bayeshopf.inference.collapsed import model_arguments
+    from bayeshopf.model.collapsed import pointwise_log_likelihood
+
+    again = replace(post)
+    again.dispatch()
+    assert "_log_likelihood_dispatched" in again.__dict__
+    kw = model_arguments(post.spec, post.features)
+    th = {k: v[1, 3] for k, v in post.run.chains.items() if k in post.map_point.params}
+    one = pointwise_log_likelihood(post.spec, th, kw["mu"], kw["sign"], kw["coeffs"],
+                                   kw["coeffs_se"], kw["omega"], kw["omega_se"])
+    np.testing.assert_allclose(again.log_likelihood[1, 3], one, rtol=1e-9)
     best, ev = fit_auto(post.features, seed=0, settings=SETTINGS, progress=False)
     assert best.criticality == "subcritical" and ev["preferred"] == "subcritical"
     assert ev["elpd_preferred"] == "subcritical" and ev["z"] > 2

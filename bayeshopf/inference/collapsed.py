@@ -540,7 +540,11 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     draws, diverging, steps = [], [], []
     done, wanted = 0, n_warm + settings.num_samples
     while True:
-        leaves, d, div, st = advance(leaves)
+        leaves, d, div, st = advance(leaves)   # dispatched: runs while Python goes on
+        if done == 0:
+            # ArviZ (R̂ and ESS, posterior.nc) and the figures' modules import now,
+            # beside the compiled chunks, not beside the Python loops before them
+            _preload.start()
         done += chunk
         steps.append(np.asarray(st))
         if done > n_warm:
@@ -614,12 +618,27 @@ def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray
         return beta, cm.draw_frequency(spec, t, kwargs["mu"], kwargs["sign"], kwargs["omega"],
                                        kwargs["omega_se"], k_freq)
 
-    # lax.map, not vmap: XLA's batched triangular solves hang on CPU
-    n_dev = spread_devices(n)
-    betas, gammas = compiled_call(
-        "maps", lambda: _spread(lambda th, keys: jax.lax.map(one, (th, keys)), n_dev),
-        _place((th, keys), n_dev), key=(model_key(kwargs), n_dev))
+    betas, gammas = mapped_call("maps", one, (th, keys), key=model_key(kwargs))
     return np.asarray(betas), np.asarray(gammas) if with_freq else None
+
+
+def mapped_call(name: str, one, items, key):
+    """``lax.map(one, items)``, compiled and stored, the items split over this process's devices.
+
+    ``lax.map``, not ``vmap``: XLA's batched Cholesky and triangular solves are
+    slow on CPU (and hung in some versions). With several CPU devices (the
+    CLI's, :func:`spread_devices`) each device maps its share of the items; the
+    results come back in order, the same as on one device.
+
+    Args:
+        name: The stored program's name (:func:`~bayeshopf.inference.cache.compiled_call`).
+        one: Maps one item (a slice of ``items``' leaves) to its outputs.
+        items: A pytree of arrays with the items on their leading axes.
+        key: Everything ``one`` closes over besides its input's shapes.
+    """
+    n_dev = spread_devices(len(jax.tree.leaves(items)[0]))
+    return compiled_call(name, lambda: _spread(lambda it: jax.lax.map(one, it), n_dev),
+                         (_place(items, n_dev),), key=(key, n_dev))
 
 
 def convergence(chains: dict) -> dict:
@@ -682,11 +701,11 @@ def sample_posterior(kwargs: dict, map_point: MapPoint, settings: CollapsedSetti
                 if method == "nuts" else f"{settings.svi_steps} steps")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
     sampler = {}
-    _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while the sampler runs
-    if method == "nuts":
+    if method == "nuts":   # _nuts starts the imports once its first chunk is dispatched
         chains, div, sampler = _nuts(kwargs, map_point, settings, k_post, progress)
         losses = np.zeros(0)
     else:
+        _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while SVI runs
         chains, losses = _svi(kwargs, map_point, settings, k_post, progress)
         div = 0
     pooled = {k: v.reshape((-1,) + v.shape[2:]) for k, v in chains.items()}
