@@ -44,6 +44,10 @@ from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")
 
+from bayeshopf.inference.cache import configure_xla_cpu
+
+configure_xla_cpu()  # before any JAX work and before SciPy's OpenBLAS loads, as the CLI does
+
 import jax
 
 jax.config.update("jax_enable_x64", True)

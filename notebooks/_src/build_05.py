@@ -42,6 +42,10 @@ import warnings
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
+from bayeshopf.inference.cache import configure_xla_cpu
+
+configure_xla_cpu()  # before any JAX work and before SciPy's OpenBLAS loads, as the CLI does
+
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
