@@ -348,12 +348,12 @@ def test_stored_notebook_is_a_full_run_whose_numbers_are_the_readme_s():
     readme = (REPO / "README.md").read_text()
     text = run.text
     # the blind run's hybrid fit, quoted in the README's limits
-    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.202]; fold 14.149 " \
-           "[14.008, 14.250]" in text
-    assert "Hopf 17.194 [17.188, 17.202] m/s, fold 14.149 [14.008, 14.250] m/s" in \
+    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.146 " \
+           "[13.984, 14.246]" in text
+    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.146 [13.984, 14.246] m/s" in \
         " ".join(readme.split())
     # the rig: the hybrid fit's fold as the README gives it, the calibrated fold
-    assert "fold 14.210 [13.740, 14.504]" in text and "14.21 [13.74, 14.50]" in readme
+    assert "fold 14.216 [13.737, 14.503]" in text and "14.22 [13.74, 14.50]" in readme
     assert "after      Hopf 17.929 m/s, fold 15.342 m/s" in text
     assert "its fold moves to 15.3 m/s" in " ".join(readme.split())
     assert run.n_images == 3
