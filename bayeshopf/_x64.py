@@ -12,12 +12,17 @@ directly.
 
 from __future__ import annotations
 
-import jax
-
 __all__ = ["ensure_x64"]
 
 
 def ensure_x64() -> None:
-    """Turn on JAX's float64 mode (``jax_enable_x64``) if it is off; otherwise do nothing."""
+    """Turn on JAX's float64 mode (``jax_enable_x64``) if it is off; otherwise do nothing.
+
+    JAX is imported here, not with bayeshopf: the CLI's figure process imports
+    the plotting code only, and JAX's import (1.1 s) would take that time from
+    the fit beside it.
+    """
+    import jax
+
     if not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)
