@@ -239,6 +239,15 @@ def test_arviz_and_matplotlib_are_not_imported_with_the_inference_core():
     assert out.stdout.strip() == "[]"
 
 
+def test_the_plotting_code_imports_without_jax():
+    """The CLI's figure process imports only the plotting code; JAX's import (1.1 s)
+    would slow the fit running beside it (``ensure_x64`` imports JAX when called)."""
+    code = "import sys, bayeshopf.plotting; print('jax' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
+
+
 def _banana(monkeypatch):
     """A two-site posterior for NUTS's stages, in place of the collapsed model's functions.
 
