@@ -779,14 +779,7 @@ def log_likelihood_draws(spec: cm.CollapsedSpec, theta: dict,
 
 def _log_likelihood_program(spec: cm.CollapsedSpec, theta: dict, features: HarmonicFeatures):
     """:func:`log_likelihood_draws` as a JAX array, dispatched and not waited for."""
-    kw = ci.model_arguments(spec, features)
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-
-    def one(t):
-        return cm.pointwise_log_likelihood(spec, t, kw["mu"], kw["sign"], kw["coeffs"],
-                                           kw["coeffs_se"], kw["omega"], kw["omega_se"])
-
-    return ci.mapped_call("loglik", one, th, key=ci.model_key(kw))
+    return ci.pointwise_log_likelihood_draws(ci.model_arguments(spec, features), theta)
 
 
 def _features(recordings: RecordingSet | HarmonicFeatures, settings: ci.CollapsedSettings
@@ -811,6 +804,7 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     t0 = time.perf_counter()
     if progress:
         print(f"MAP ({criticality}): deterministic start and L-BFGS", file=sys.stderr)
+    ci.compile_programs(kwargs, settings)     # compiled beside the MAP (an empty cache)
     map_point = ci.fit_map(kwargs, max_steps=settings.lbfgs_steps)
     timings["map"] = time.perf_counter() - t0
     run = ci.sample_posterior(kwargs, map_point, settings, seed=seed, progress=progress)

@@ -205,6 +205,62 @@ def test_compiled_call_replaces_a_damaged_file_and_runs_without_a_cache(monkeypa
     assert call(2.0, x) == first and made == [2.0, 2.0]
 
 
+def test_compile_ahead_runs_the_program_it_compiled_and_falls_back_for_other_shapes(
+        monkeypatch, tmp_path):
+    """A program compiled in the background (``compile_ahead``) is what
+    ``compiled_function`` then runs, for arguments of the shapes it was compiled for;
+    others go through ``jax.jit`` as before. Without the persistent cache it does nothing."""
+    monkeypatch.setattr(cache, "_ENABLED", [str(tmp_path)])
+    monkeypatch.setattr(cache, "_COMPILED", {})
+    made = []
+
+    def make():
+        made.append(1)
+        return lambda x: jnp.linalg.cholesky(jnp.eye(2) * x.sum())[0, 0] + jnp.sin(x).sum()
+
+    spec = (jax.ShapeDtypeStruct((5,), jnp.float64),)
+    assert cache.compile_ahead("ahead-probe", make, spec, key=("k",)) is not None
+    assert made == [1]                 # traced and exported here, compiled in the background
+    x = jnp.linspace(0.5, 1.5, 5)
+    fn = cache.compiled_function("ahead-probe", make, (x,), key=("k",))
+    assert isinstance(fn, cache._Ahead)
+    assert float(fn(x)) == float(jax.jit(make())(x))
+    assert float(fn(np.asarray(x))) == float(jax.jit(make())(x)) and fn.calls == [2, 0]
+    y = jnp.arange(1.0, 4.0)             # another shape: another program, compiled as before
+    other = cache.compiled_function("ahead-probe", make, (y,), key=("k",))
+    assert not isinstance(other, cache._Ahead)
+    assert float(other(y)) == pytest.approx(np.sqrt(6.0) + float(jnp.sin(y).sum()), rel=1e-14)
+    assert fn.calls == [2, 0] and made == [1, 1, 1, 1]     # the checks' jits, then the export
+    monkeypatch.setattr(cache, "_ENABLED", [])
+    monkeypatch.setattr(cache, "_COMPILED", {})
+    assert cache.compile_ahead("ahead-probe", make, spec, key=("k",)) is None
+    assert cache._COMPILED == {}
+
+
+def test_stored_shapes_are_computed_once_and_read_back(monkeypatch, tmp_path):
+    monkeypatch.setattr(cache, "_ENABLED", [str(tmp_path)])
+    computed = []
+    f64, u32 = jnp.float64, jnp.uint32
+
+    def compute():
+        computed.append(1)
+        return {"x": jax.ShapeDtypeStruct((9,), f64),
+                "states": [jax.ShapeDtypeStruct((4, 9, 9), f64),
+                           jax.ShapeDtypeStruct((4, 2), u32)],
+                "theta": {"mu0": jax.ShapeDtypeStruct((2000,), f64),
+                          "sigma": jax.ShapeDtypeStruct((2000, 2), f64)}}
+
+    first = cache.stored_shapes("shapes-probe", ("k", 1), compute)
+    again = cache.stored_shapes("shapes-probe", ("k", 1), compute)
+    assert computed == [1] and again == first and again["states"][1].dtype == np.uint32
+    assert cache.stored_shapes("shapes-probe", ("k", 2), compute) == first   # another key
+    assert computed == [1, 1]
+    for f in tmp_path.glob(f"{cache.STORED_PREFIX}shapes-probe-*.json"):
+        f.write_text("{not json")
+    assert cache.stored_shapes("shapes-probe", ("k", 1), compute) == first
+    assert computed == [1, 1, 1]
+
+
 _TWO_PROCESSES = """
 import sys
 from bayeshopf._x64 import ensure_x64
@@ -346,6 +402,57 @@ def test_chains_spread_over_devices_are_the_chains_of_one_device():
     diff, same_divergences, between_chains = out[1].split()
     assert float(diff) == 0.0 and same_divergences == "True"
     assert float(between_chains) > 0.1       # chains of their own keys, not copies
+
+
+_AHEAD = """
+import os, sys
+os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+import numpy as np, pytest
+from types import SimpleNamespace
+from dataclasses import replace
+import jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
+sys.path.insert(0, sys.argv[1])
+import test_inference_setup as t
+from bayeshopf import _preload
+from bayeshopf.inference import cache, collapsed as ci
+mp = pytest.MonkeyPatch()
+_, unravel, start = t._banana(mp)
+info, _, potential = ci.model_functions({})
+info.param_info = SimpleNamespace(z={"mu0": jnp.asarray(0.0), "a2": jnp.asarray(0.0)})
+mp.setattr(ci, "_map_draw", lambda kw: lambda a: (a[0]["mu0"] * 2.0, a[1].sum()))
+mp.setattr(ci, "_pointwise", lambda kw: lambda t: t["a2"] - t["mu0"])
+settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
+                   extend_samples=100, max_samples=100)
+key = jax.random.PRNGKey(5)
+cache.enable_compilation_cache(sys.argv[2])
+plain, _, _ = ci._nuts({}, start, settings, key, progress=False)
+mp.setattr(cache, "_COMPILED", {})
+mp.setattr(_preload, "available_cores", lambda: 2)
+ci.compile_programs({}, settings)
+ahead = {n: f for (n, _), f in cache._COMPILED.items()}
+print(sorted(ahead), all(isinstance(f, cache._Ahead) for f in ahead.values()))
+draws, _, _ = ci._nuts({}, start, settings, key, progress=False)
+print(max(float(np.abs(draws[k] - plain[k]).max()) for k in plain),
+      ahead["nuts-advance"].calls, ahead["value-and-grad"].calls[1],
+      len(ahead["nuts-advance"].signature[1][0][2].device_set),
+      all(f.future.exception() is None for f in ahead.values()))
+"""
+
+
+def test_programs_compiled_ahead_are_those_nuts_runs_and_give_its_draws(tmp_path):
+    """``compile_programs`` traces the potential, NUTS's advance (its states split over
+    two devices), the map draws and the log-likelihood before the MAP and compiles them
+    in the background; NUTS then runs those programs, with the same draws as without."""
+    out = subprocess.run([sys.executable, "-c", _AHEAD, os.path.dirname(__file__),
+                          str(tmp_path)], capture_output=True, text=True, check=True
+                         ).stdout.split("\n")
+    assert out[0] == "['loglik', 'maps', 'nuts-advance', 'value-and-grad'] True"
+    diff, *rest = out[1].split(" ", 1)
+    assert float(diff) == 0.0
+    # 2 chunks of 100 iterations, both from the program compiled ahead; the Laplace
+    # covariance's gradients too; the advance compiled for states on two devices
+    assert rest[0] == "[2, 0] 0 2 True"
 
 
 _MAPPED = """

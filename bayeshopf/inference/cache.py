@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
 import sys
 import warnings
@@ -205,9 +206,14 @@ def _digest(name: str, key, args) -> str:
             h.update(f"{a.dtype}{a.shape}".encode())
             h.update(np.ascontiguousarray(a).tobytes())
     for leaf in jax.tree_util.tree_leaves(args):   # the program takes any values of these
-        h.update(f"{np.result_type(leaf)}{np.shape(leaf)}".encode())
+        h.update(f"{np.dtype(_dtype(leaf))}{tuple(np.shape(leaf))}".encode())
     h.update(str(jax.tree_util.tree_structure((key, args))).encode())
     return h.hexdigest()[:40]
+
+
+def _dtype(leaf):
+    """The dtype of an array, a Python number or a ``jax.ShapeDtypeStruct``."""
+    return leaf.dtype if hasattr(leaf, "dtype") else np.result_type(leaf)
 
 
 def compiled_call(name: str, make: Callable[[], Callable], args: tuple, key) -> object:
@@ -254,6 +260,133 @@ def compiled_function(name: str, make: Callable[[], Callable], args: tuple, key)
     if (name, digest) not in _COMPILED:
         _COMPILED[name, digest] = _load_or_export(name, digest, make, args)
     return _COMPILED[name, digest]
+
+
+def compile_ahead(name: str, make: Callable[[], Callable], args: tuple, key) -> Callable | None:
+    """Start compiling what :func:`compiled_function` would return, in a background thread.
+
+    With an empty cache most of a fit is XLA compiling its programs one after
+    another, on one core: the MAP's potential, then NUTS's start and its
+    advance, each when it is first called. XLA's compiler does not hold
+    Python's interpreter, so a program that will be needed later can compile
+    on the other core while this thread goes on (the MAP, the other programs'
+    tracing). Here the function is traced and exported (or loaded) in the
+    calling thread (tracing runs NumPyro's handlers, whose stack is shared by
+    every thread), and only its lowering and compilation run in a background
+    thread. A later :func:`compiled_function` with the same name, key and
+    argument shapes gets a callable that waits for that compilation and runs
+    its result (arguments of other shapes make another program, as for
+    :func:`compiled_function`; placed on other devices, they go through
+    ``jax.jit``). Without the persistent cache this does nothing.
+
+    Args:
+        name: As :func:`compiled_call`.
+        make: As :func:`compiled_call`.
+        args: Arrays or ``jax.ShapeDtypeStruct`` (with the ``sharding`` the
+            arguments will have, for a program over several devices).
+        key: As :func:`compiled_call`.
+
+    Returns:
+        The jitted function (for ``jax.eval_shape``), or ``None`` without the
+        persistent cache.
+    """
+    if not _ENABLED:
+        return None
+    digest = _digest(name, key, args)
+    if (name, digest) not in _COMPILED:
+        _COMPILED[name, digest] = _Ahead(_load_or_export(name, digest, make, args), args)
+    fn = _COMPILED[name, digest]
+    return fn.jitted if isinstance(fn, _Ahead) else fn
+
+
+def stored_shapes(name: str, key, compute: Callable[[], dict]) -> dict:
+    """Shapes and dtypes that take tracing to find, stored beside the programs.
+
+    :func:`compile_ahead` needs the shapes of a program's arguments before the
+    program exists, and finding them traces the model (NumPyro's
+    ``initialize_model``, NUTS's ``init``): about 2 s of a warm rig fit, which
+    otherwise loads every program without tracing anything. ``compute``'s
+    result is stored in the compilation cache folder under a SHA-256 of
+    ``name``, ``key`` and the sources (as :func:`compiled_call`'s programs are)
+    and read back by the next process.
+
+    Args:
+        name: Names the file.
+        key: Everything the shapes depend on.
+        compute: Returns a dict whose values are ``jax.ShapeDtypeStruct``, or
+            lists or dicts of them (computed with ``jax.eval_shape``).
+
+    Returns:
+        ``compute()``, or the stored copy of it (without shardings).
+    """
+    folder = _ENABLED[0] if _ENABLED else None
+    path = None if folder is None else (
+        Path(folder) / f"{STORED_PREFIX}{name}-{_digest(name, key, ())}.json")
+    if path is not None and path.is_file():
+        with contextlib.suppress(Exception):    # damaged or foreign: computed again
+            return {k: _from_json(v) for k, v in json.loads(path.read_text()).items()}
+    shapes = compute()
+    if path is not None:
+        with contextlib.suppress(OSError), replacing(path) as tmp:
+            tmp.write_text(json.dumps({k: _to_json(v) for k, v in shapes.items()}))
+    return shapes
+
+
+def _to_json(v):
+    if isinstance(v, dict):
+        return {"dict": {k: _to_json(x) for k, x in v.items()}}
+    if isinstance(v, list | tuple):
+        return {"list": [_to_json(x) for x in v]}
+    return {"shape": list(v.shape), "dtype": np.dtype(v.dtype).name}
+
+
+def _from_json(v):
+    if "dict" in v:
+        return {k: _from_json(x) for k, x in v["dict"].items()}
+    if "list" in v:
+        return [_from_json(x) for x in v["list"]]
+    return jax.ShapeDtypeStruct(tuple(v["shape"]), np.dtype(v["dtype"]))
+
+
+class _Ahead:
+    """A jitted function whose compilation for ``args``' shapes runs in a background thread."""
+
+    def __init__(self, jitted, args: tuple):
+        self.jitted = jitted
+        self.signature = _signature(args)
+        self.future = _compiler().submit(lambda: jitted.lower(*args).compile())
+        self.calls = [0, 0]      # calls that ran the program compiled ahead, and the others
+
+    def __call__(self, *args):
+        if _signature(args, like=self.signature) == self.signature:
+            self.calls[0] += 1
+            return self.future.result()(*args)
+        self.calls[1] += 1
+        return self.jitted(*args)
+
+
+def _signature(args: tuple, like=None) -> tuple:
+    """Tree structure, shapes, dtypes and (where ``like`` names one) shardings of ``args``."""
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    want = like[1] if like is not None else [None] * len(leaves)
+    if len(want) != len(leaves):
+        return (tree, ())
+    return (tree, tuple(
+        (tuple(np.shape(x)), np.dtype(_dtype(x)),
+         getattr(x, "sharding", None) if (like is None or w[2] is not None) else None)
+        for x, w in zip(leaves, want, strict=True)))
+
+
+_POOL: list = []
+
+
+def _compiler():
+    """The background thread of :func:`compile_ahead` (one: the process's other core)."""
+    if not _POOL:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL.append(ThreadPoolExecutor(1, thread_name_prefix="bayeshopf-compile"))
+    return _POOL[0]
 
 
 #: The functions :func:`compiled_function` returned in this process, by name and digest.

@@ -47,7 +47,12 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics.arviz_io import rhat_ess
 from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures
-from bayeshopf.inference.cache import compiled_call, compiled_function
+from bayeshopf.inference.cache import (
+    compile_ahead,
+    compiled_call,
+    compiled_function,
+    stored_shapes,
+)
 from bayeshopf.model import collapsed as cm
 
 #: Gradient norm (unconstrained space) below which the MAP counts as converged.
@@ -218,17 +223,70 @@ class MapPoint:
     polish_evaluations: int = 0
 
 
-def potential_program(kwargs: dict, n: int):
+def potential_program(kwargs: dict, n: int, ahead: bool = False):
     """The potential's value and gradient at a flat unconstrained vector, compiled.
 
     One program per data set and settings, stored
     (:func:`~bayeshopf.inference.cache.compiled_function`),
     shared by the start, the MAP's L-BFGS and the Laplace covariance of NUTS's start.
+    With ``ahead``, compiled in the background instead
+    (:func:`~bayeshopf.inference.cache.compile_ahead`) and ``None`` returned.
     """
     def make():
         return jax.value_and_grad(model_functions(kwargs)[2])
 
-    return compiled_function("value-and-grad", make, (jnp.zeros(n),), key=model_key(kwargs))
+    args, key = (jax.ShapeDtypeStruct((n,), jnp.float64),), model_key(kwargs)
+    if ahead:
+        compile_ahead("value-and-grad", make, args, key=key)
+        return None
+    return compiled_function("value-and-grad", make, args, key=key)
+
+
+def compile_programs(kwargs: dict, settings: CollapsedSettings) -> None:
+    """Start compiling the MAP's and NUTS's programs in the background, before the MAP.
+
+    With an empty compilation cache most of a rig fit was XLA compiling, one
+    program after another on one core, each when first called: the potential
+    (2.4 s), NUTS's start (2.5 s) and advance (5.5 s), the map draws (1.7 s)
+    and the log-likelihood (1.8 s; ``jax.monitoring`` durations). All but NUTS's
+    start (which holds the MAP point) are exported (or loaded) here and
+    compiled in a background thread, on the other core, while this thread
+    finds the MAP (:func:`~bayeshopf.inference.cache.compile_ahead`). Their
+    arguments' shapes are traced once per data set and settings and then read
+    from the cache folder (:func:`~bayeshopf.inference.cache.stored_shapes`),
+    so that a warm fit traces nothing here. The map draws and the
+    log-likelihood are compiled for the draws of the first convergence check;
+    chains extended past it compile theirs when called. Does nothing on one
+    core or without the persistent cache.
+    """
+    if _preload.available_cores() < 2:       # no core to compile on beside this thread
+        return
+    nuts = settings.inference == "nuts"
+    draws = settings.num_chains * settings.num_samples    # those of the first convergence check
+    n_dev = spread_devices(settings.num_chains)
+
+    def shapes():
+        info, unravel, _ = model_functions(kwargs)
+        x = ravel_pytree(info.param_info.z)[0]
+        theta = jax.eval_shape(lambda x: info.postprocess_fn(unravel(x)), x)
+        return {"x": jax.ShapeDtypeStruct(x.shape, x.dtype),
+                "theta": {k: jax.ShapeDtypeStruct((draws,) + a.shape, a.dtype)
+                          for k, a in theta.items() if not k.startswith("marginal")},
+                "states": _nuts_states(kwargs, settings, x.shape[0]) if nuts else []}
+
+    # traced once per data set and settings, then read from the cache folder
+    got = stored_shapes("shapes", (_nuts_key(kwargs, settings), nuts, draws,
+                                   settings.num_chains), shapes)
+    n = got["x"].shape[0]
+    potential_program(kwargs, n, ahead=True)
+    if not nuts:
+        return
+    where = _placement(n_dev)
+    states = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=where) for a in got["states"]]
+    _nuts_advance(kwargs, settings, n, n_dev, states, ahead=True)
+    keys = jax.ShapeDtypeStruct((draws, 2), jnp.uint32)
+    mapped_call("maps", _map_draw(kwargs), (got["theta"], keys), key=model_key(kwargs), ahead=True)
+    mapped_call("loglik", _pointwise(kwargs), got["theta"], key=model_key(kwargs), ahead=True)
 
 
 def constrain_program(kwargs: dict, n: int):
@@ -439,7 +497,106 @@ def _place(tree, n_dev: int):
     """``tree`` split over ``n_dev`` devices along its leading axes, as ``_spread`` takes it."""
     if n_dev == 1:
         return tree
-    return jax.device_put(tree, NamedSharding(_mesh(n_dev), PartitionSpec("items")))
+    # from host memory: splitting arrays already on one device compiles a slicing
+    # program per shape (1–1.4 s with an empty cache, beside the NUTS compilations)
+    return jax.device_put(jax.tree.map(np.asarray, tree), _placement(n_dev))
+
+
+def _placement(n_dev: int) -> NamedSharding | None:
+    """The sharding :func:`_place` gives (``None``: one device, left where it is)."""
+    return None if n_dev == 1 else NamedSharding(_mesh(n_dev), PartitionSpec("items"))
+
+
+def _nuts_kernel(kwargs, settings: CollapsedSettings, cov=None) -> NUTS:
+    """NumPyro's NUTS on the collapsed potential (``cov``: the starting inverse mass matrix)."""
+    return NUTS(potential_fn=model_functions(kwargs)[2], dense_mass=settings.dense_mass,
+                inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
+                max_tree_depth=settings.max_tree_depth)
+
+
+def _nuts_key(kwargs, settings: CollapsedSettings) -> tuple:
+    """Everything NUTS's programs close over besides the MAP point (``inference.cache``)."""
+    return (model_key(kwargs), settings.num_warmup, settings.dense_mass, settings.target_accept,
+            settings.max_tree_depth)
+
+
+def _nuts_start(kwargs, settings: CollapsedSettings, x0, keys, cov) -> list:
+    """Every chain's initial state at ``x0`` (NumPyro's ``init``), as flat leaves, compiled.
+
+    The program holds ``x0`` (one per data set, settings and MAP point); the
+    draws of a fit are those of the program that holds it.
+    """
+    def make_start():
+        def start(keys, cov):
+            nuts = _nuts_kernel(kwargs, settings, cov if settings.dense_mass else None)
+            states = jax.lax.map(lambda k: nuts.init(k, settings.num_warmup, init_params=x0,
+                                                     model_args=(), model_kwargs={}), keys)
+            return jax.tree.leaves(states)
+
+        return start
+
+    return compiled_call("nuts-start", make_start, (keys, jnp.asarray(cov)),
+                         key=(_nuts_key(kwargs, settings), x0))
+
+
+def _nuts_states(kwargs, settings: CollapsedSettings, n: int) -> list:
+    """Shapes of every chain's state as :func:`_nuts_start` returns it (traced, not run)."""
+    nuts = _nuts_kernel(kwargs, settings, jnp.eye(n) if settings.dense_mass else None)
+    one = jax.eval_shape(lambda: jax.tree.leaves(nuts.init(
+        jax.random.PRNGKey(0), settings.num_warmup, init_params=jnp.zeros(n), model_args=(),
+        model_kwargs={})))
+    return [jax.ShapeDtypeStruct((settings.num_chains,) + a.shape, a.dtype) for a in one]
+
+
+def _nuts_advance(kwargs, settings: CollapsedSettings, n: int, n_dev: int, leaves,
+                  ahead: bool = False):
+    """The program that advances every chain by :func:`nuts_chunk` iterations, compiled.
+
+    It takes the chains' states as flat leaves (as :func:`_nuts_start` gives
+    them, split over ``n_dev`` devices by :func:`_place`) and returns
+    ``(leaves, draws, diverging, steps)``. It does not depend on the MAP point,
+    so it can be traced and compiled before the MAP is found: with ``ahead``
+    it is (:func:`~bayeshopf.inference.cache.compile_ahead`), and ``None`` is
+    returned. ``leaves``: the states it will be called with (arrays, or their
+    shapes and placement, :func:`_nuts_states`).
+    """
+    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
+
+    def init(nuts):    # the kernel's configuration (warm-up schedule) and the state's structure
+        return nuts.init(jax.random.PRNGKey(0), n_warm, init_params=jnp.zeros(n),
+                         model_args=(), model_kwargs={})
+
+    def make_advance():
+        info, unravel, _ = model_functions(kwargs)
+
+        def advance(leaves):
+            nuts = _nuts_kernel(kwargs, settings)
+            # the states passed in carry the point and the adapted mass matrix
+            tree = jax.tree.structure(init(nuts))
+
+            def chain(state_leaves):
+                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+                    s = nuts.sample(s, (), {})
+                    return s, (s.z, s.diverging, s.num_steps)
+
+                state, out = jax.lax.scan(step, jax.tree.unflatten(tree, state_leaves), None,
+                                          length=chunk)
+                return jax.tree.leaves(state), out
+
+            leaves, (x, diverging, steps) = jax.lax.map(chain, leaves)
+            # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
+            # vmap: XLA's batched Cholesky is slow on CPU
+            draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
+                                x.reshape(-1, x.shape[-1]))
+            return leaves, draws, diverging, steps
+
+        return _spread(advance, n_dev)     # draws: chain by chain, as on one device
+
+    key = (_nuts_key(kwargs, settings), chunk, n_dev)
+    if ahead:
+        compile_ahead("nuts-advance", make_advance, (leaves,), key=key)
+        return None
+    return compiled_function("nuts-advance", make_advance, (leaves,), key=key)
 
 
 def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
@@ -479,64 +636,15 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
                        f"max_samples={settings.max_samples}, "
                        f"extend_samples={settings.extend_samples}")
     x0 = ravel_pytree({k: jnp.asarray(v) for k, v in map_point.unconstrained.items()})[0]
-    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
     n_dev = spread_devices(settings.num_chains)
-    # everything the programs close over besides the model's data (inference.cache)
-    key_ = (model_key(kwargs), x0, n_warm, settings.dense_mass, settings.target_accept,
-            settings.max_tree_depth)
-
-    def kernel(potential, cov):
-        return NUTS(potential_fn=potential, dense_mass=settings.dense_mass,
-                    inverse_mass_matrix=cov, target_accept_prob=settings.target_accept,
-                    max_tree_depth=settings.max_tree_depth)
-
-    def make_start():
-        _, _, potential = model_functions(kwargs)
-
-        def start(keys, cov):
-            nuts = kernel(potential, cov if settings.dense_mass else None)
-            states = jax.lax.map(lambda k: nuts.init(k, n_warm, init_params=x0, model_args=(),
-                                                     model_kwargs={}), keys)
-            return jax.tree.leaves(states)
-
-        return start
-
-    def make_advance():
-        info, unravel, potential = model_functions(kwargs)
-
-        def advance(leaves):
-            nuts = kernel(potential, None)
-            # init only configures the kernel (warm-up schedule, tree depth) and gives
-            # the state's structure; the states passed in carry the adapted mass matrix
-            tree = jax.tree.structure(nuts.init(jax.random.PRNGKey(0), n_warm, init_params=x0,
-                                                model_args=(), model_kwargs={}))
-
-            def chain(state_leaves):
-                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
-                    s = nuts.sample(s, (), {})
-                    return s, (s.z, s.diverging, s.num_steps)
-
-                state, out = jax.lax.scan(step, jax.tree.unflatten(tree, state_leaves), None,
-                                          length=chunk)
-                return jax.tree.leaves(state), out
-
-            leaves, (x, diverging, steps) = jax.lax.map(chain, leaves)
-            # every site, the deterministic ones (μ0, a2, the fold) too; lax.map, not
-            # vmap: XLA's batched Cholesky is slow on CPU
-            draws = jax.lax.map(lambda xi: info.postprocess_fn(unravel(xi)),
-                                x.reshape(-1, x.shape[-1]))
-            return leaves, draws, diverging, steps
-
-        return _spread(advance, n_dev)     # draws: chain by chain, as on one device
-
     keys = jax.random.split(key, settings.num_chains)
-    # compiled once per data set, MAP point and settings (any seed), then loaded (inference.cache)
+    # compiled once per data set, settings and MAP point (any seed), then loaded
+    # (inference.cache); compile_programs may have started compiling them already
     cov, laplace = (laplace_covariance(potential_program(kwargs, x0.shape[0]), x0)
                     if settings.dense_mass else (np.eye(x0.shape[0]), False))
-    leaves = compiled_call("nuts-start", make_start, (keys, jnp.asarray(cov)), key=key_)
-    leaves = _place(leaves, n_dev)
-    advance = compiled_function("nuts-advance", make_advance, (leaves,),
-                                key=(key_, chunk, n_dev))
+    leaves = _place(_nuts_start(kwargs, settings, x0, keys, cov), n_dev)
+    advance = _nuts_advance(kwargs, settings, x0.shape[0], n_dev, leaves)
+    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
     draws, diverging, steps = [], [], []
     done, wanted = 0, n_warm + settings.num_samples
     while True:
@@ -606,23 +714,48 @@ def _sample_maps(spec, kwargs, theta: dict, key) -> tuple[np.ndarray, np.ndarray
     n = len(next(iter(theta.values())))
     keys = jax.random.split(key, n)
     th = {k: jnp.asarray(v) for k, v in theta.items()}
-    with_freq = spec.omega_centre is not None
+    betas, gammas = mapped_call("maps", _map_draw(kwargs), (th, keys), key=model_key(kwargs))
+    return np.asarray(betas), np.asarray(gammas) if spec.omega_centre is not None else None
+
+
+def _map_draw(kwargs):
+    """``(θ, key) ↦ (β, γ)``: one exact draw of the map's and the frequency's coefficients."""
+    spec = kwargs["spec"]
 
     def one(a):
         t, k = a
         k_map, k_freq = jax.random.split(k)
         beta = cm.draw_map(spec, t, kwargs["mu"], kwargs["sign"], kwargs["coeffs"],
                            kwargs["coeffs_se"], k_map)
-        if not with_freq:
+        if spec.omega_centre is None:
             return beta, jnp.zeros(0)
         return beta, cm.draw_frequency(spec, t, kwargs["mu"], kwargs["sign"], kwargs["omega"],
                                        kwargs["omega_se"], k_freq)
 
-    betas, gammas = mapped_call("maps", one, (th, keys), key=model_key(kwargs))
-    return np.asarray(betas), np.asarray(gammas) if with_freq else None
+    return one
 
 
-def mapped_call(name: str, one, items, key):
+def pointwise_log_likelihood_draws(kwargs, theta: dict):
+    """``log p(y_i | y_{−i}, θ)`` of each recording at each draw, ``(n, n_rec)``, dispatched.
+
+    :func:`~bayeshopf.model.collapsed.pointwise_log_likelihood` over the draws
+    (:func:`mapped_call`); a JAX array, computed while the caller goes on.
+    """
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    return mapped_call("loglik", _pointwise(kwargs), th, key=model_key(kwargs))
+
+
+def _pointwise(kwargs):
+    """``θ ↦ log p(y_i | y_{−i}, θ)`` of every recording (the model's blocks)."""
+    def one(t):
+        return cm.pointwise_log_likelihood(kwargs["spec"], t, kwargs["mu"], kwargs["sign"],
+                                           kwargs["coeffs"], kwargs["coeffs_se"],
+                                           kwargs["omega"], kwargs["omega_se"])
+
+    return one
+
+
+def mapped_call(name: str, one, items, key, ahead: bool = False):
     """``lax.map(one, items)``, compiled and stored, the items split over this process's devices.
 
     ``lax.map``, not ``vmap``: XLA's batched Cholesky and triangular solves are
@@ -633,12 +766,24 @@ def mapped_call(name: str, one, items, key):
     Args:
         name: The stored program's name (:func:`~bayeshopf.inference.cache.compiled_call`).
         one: Maps one item (a slice of ``items``' leaves) to its outputs.
-        items: A pytree of arrays with the items on their leading axes.
+        items: A pytree of arrays with the items on their leading axes
+            (``jax.ShapeDtypeStruct`` with ``ahead``).
         key: Everything ``one`` closes over besides its input's shapes.
+        ahead: Only start compiling the program for such items in the
+            background (:func:`~bayeshopf.inference.cache.compile_ahead`); returns ``None``.
     """
-    n_dev = spread_devices(len(jax.tree.leaves(items)[0]))
-    return compiled_call(name, lambda: _spread(lambda it: jax.lax.map(one, it), n_dev),
-                         (_place(items, n_dev),), key=(key, n_dev))
+    n_dev = spread_devices(jax.tree.leaves(items)[0].shape[0])
+
+    def make():
+        return _spread(lambda it: jax.lax.map(one, it), n_dev)
+
+    if ahead:
+        where = _placement(n_dev)
+        compile_ahead(name, make, (jax.tree.map(
+            lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=where), items),),
+            key=(key, n_dev))
+        return None
+    return compiled_call(name, make, (_place(items, n_dev),), key=(key, n_dev))
 
 
 def convergence(chains: dict) -> dict:
