@@ -12,6 +12,7 @@ diagram, the posterior predictive check and each recording's orbit error.
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -37,7 +38,11 @@ from bayeshopf.features.harmonics import (
     time_design,
 )
 from bayeshopf.inference import collapsed as ci
-from bayeshopf.inference.cache import enable_compilation_cache, release_compiled
+from bayeshopf.inference.cache import (
+    compiled_call,
+    enable_compilation_cache,
+    release_compiled,
+)
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
 
@@ -507,42 +512,39 @@ def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
     return np.unique(np.linspace(0, total - 1, n).round().astype(int))
 
 
-_ORBIT_FNS: dict[int, tuple] = {}
+_SPEC_KEYS: dict[int, tuple] = {}
 
 
 def clear_orbit_jits() -> None:
-    """Forget the compiled orbit functions of every spec.
+    """Forget the stored keys of every spec (the programs are in ``inference.cache``).
 
     Called by :func:`~bayeshopf.inference.cache.release_compiled`.
     """
-    _ORBIT_FNS.clear()
+    _SPEC_KEYS.clear()
 
 
-def _orbit_fn(spec: cm.CollapsedSpec):
-    """The jitted ``(θ, β, μ per draw, sign) ↦ coefficients``, compiled once per spec."""
-    hit = _ORBIT_FNS.get(id(spec))
-    if hit is not None and hit[0] is spec:
-        return hit[1]
+def _spec_key(spec: cm.CollapsedSpec) -> str:
+    """What the orbit and frequency programs close over: the spec, as JSON (kept per spec)."""
+    hit = _SPEC_KEYS.get(id(spec))
+    if hit is None or hit[0] is not spec:
+        if len(_SPEC_KEYS) > 16:
+            _SPEC_KEYS.clear()
+        hit = _SPEC_KEYS[id(spec)] = (spec, json.dumps(spec.to_dict(), sort_keys=True))
+    return hit[1]
 
+
+def _orbit_program(spec: cm.CollapsedSpec):
+    """``(θ, β, μ per draw, sign) ↦ coefficients`` (to be compiled; lax.map over draws)."""
     def one(a, sign):     # Φ(μ) β: the design of the likelihood, at every μ of the grid
         t, b, mu = a
         return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b)
 
-    # lax.map over draws: one draw's network features (μ × phase × unit) in memory at a time
-    fn = jax.jit(lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu)))
-    if len(_ORBIT_FNS) > 16:
-        _ORBIT_FNS.clear()
-    _ORBIT_FNS[id(spec)] = (spec, fn)
-    return fn
+    # one draw's network features (μ × phase × unit) in memory at a time
+    return lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu))
 
 
 def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
-    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid, ``(n, n_mu)``.
-
-    Compiled once per spec (:func:`~bayeshopf.model.collapsed.spec_jit`): run op
-    by op, its few dozen operations cost about 0.1 s a call in a fresh process,
-    and the CLI calls it some twenty times.
-    """
+    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid, ``(n, n_mu)``."""
     th = {k: v[:, None] for k, v in th.items()}
     return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
 
@@ -565,7 +567,9 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     mu = np.asarray(mu, dtype=float)
     mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
     th = {k: jnp.asarray(v) for k, v in theta.items()}
-    return np.asarray(_orbit_fn(spec)(th, jnp.asarray(betas), jnp.asarray(mu), float(sign)))
+    # stored (inference.cache.compiled_call): a warm process neither traces nor lowers it
+    return np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
+        th, jnp.asarray(betas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
 
 
 def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float, *,
@@ -580,8 +584,9 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     ensure_x64()
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
     th = {k: jnp.asarray(v) for k, v in theta.items() if np.ndim(v) == 1}
-    om = np.asarray(cm.spec_jit(spec, _frequency_grid)(th, jnp.asarray(gammas),
-                                                       jnp.asarray(mu), float(sign)))
+    om = np.asarray(compiled_call(
+        "frequency-grid", lambda: lambda *a: _frequency_grid(spec, *a),
+        (th, jnp.asarray(gammas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
     if predictive:
         sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
         om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))
