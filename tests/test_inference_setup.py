@@ -205,7 +205,7 @@ def test_compiled_call_replaces_a_damaged_file_and_runs_without_a_cache(monkeypa
     assert call(2.0, x) == first and made == [2.0, 2.0]
 
 
-def test_compile_ahead_runs_the_program_it_compiled_and_falls_back_for_other_shapes(
+def test_compile_ahead_runs_the_program_it_compiled_and_other_shapes_compile_their_own(
         monkeypatch, tmp_path):
     """A program compiled in the background (``compile_ahead``) is what
     ``compiled_function`` then runs, for arguments of the shapes it was compiled for;
