@@ -369,22 +369,29 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
         ci._nuts({}, start, replace(settings, max_samples=50), key, progress=False)
 
 
-_SPREAD = """
+#: A process with ``{devices}`` CPU devices and the banana posterior (``_banana``) in place
+#: of the model; four chains of 100 + 100 iterations from key 5.
+_BANANA_PROCESS = """
 import os, sys
-os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=3"
+os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count={devices}"
 import numpy as np, pytest
+from types import SimpleNamespace
 from dataclasses import replace
-import jax
+import jax, jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, sys.argv[1])
 import test_inference_setup as t
-from bayeshopf.inference import collapsed as ci
+from bayeshopf import _preload
+from bayeshopf.inference import cache, collapsed as ci
 mp = pytest.MonkeyPatch()
 _, _, start = t._banana(mp)
-print(jax.local_device_count(), [ci.spread_devices(n) for n in (1, 2, 3, 4, 5, 6)])
 settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
                    extend_samples=100, max_samples=100)
 key = jax.random.PRNGKey(5)
+"""
+
+_SPREAD = _BANANA_PROCESS.format(devices=3) + """
+print(jax.local_device_count(), [ci.spread_devices(n) for n in (1, 2, 3, 4, 5, 6)])
 spread, div, _ = ci._nuts({}, start, settings, key, progress=False)
 mp.setattr(ci, "spread_devices", lambda n: 1)
 one, div1, _ = ci._nuts({}, start, settings, key, progress=False)
@@ -404,27 +411,11 @@ def test_chains_spread_over_devices_are_the_chains_of_one_device():
     assert float(between_chains) > 0.1       # chains of their own keys, not copies
 
 
-_AHEAD = """
-import os, sys
-os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
-import numpy as np, pytest
-from types import SimpleNamespace
-from dataclasses import replace
-import jax, jax.numpy as jnp
-jax.config.update("jax_enable_x64", True)
-sys.path.insert(0, sys.argv[1])
-import test_inference_setup as t
-from bayeshopf import _preload
-from bayeshopf.inference import cache, collapsed as ci
-mp = pytest.MonkeyPatch()
-_, unravel, start = t._banana(mp)
+_AHEAD = _BANANA_PROCESS.format(devices=2) + """
 info, _, potential = ci.model_functions({})
 info.param_info = SimpleNamespace(z={"mu0": jnp.asarray(0.0), "a2": jnp.asarray(0.0)})
 mp.setattr(ci, "_map_draw", lambda kw: lambda a: (a[0]["mu0"] * 2.0, a[1].sum()))
 mp.setattr(ci, "_pointwise", lambda kw: lambda t: t["a2"] - t["mu0"])
-settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
-                   extend_samples=100, max_samples=100)
-key = jax.random.PRNGKey(5)
 cache.enable_compilation_cache(sys.argv[2])
 plain, _, _ = ci._nuts({}, start, settings, key, progress=False)
 mp.setattr(cache, "_COMPILED", {})

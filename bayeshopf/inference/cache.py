@@ -154,14 +154,12 @@ def release_compiled() -> None:
     for an earlier fit is reused by a later one, and the persistent cache on
     disk is kept, so a repeated fit still loads its programs instead of compiling.
     """
-    from bayeshopf import posterior
     from bayeshopf.inference.collapsed import clear_model_functions
     from bayeshopf.model import collapsed
 
     collapsed.clear_jits()
     clear_model_functions()
     _COMPILED.clear()
-    posterior.clear_orbit_jits()
     jax.clear_caches()
 
 

@@ -539,12 +539,19 @@ def _nuts_start(kwargs, settings: CollapsedSettings, x0, keys, cov) -> list:
                          key=(_nuts_key(kwargs, settings), x0))
 
 
+def _nuts_init(nuts: NUTS, settings: CollapsedSettings, n: int):
+    """A state of ``nuts`` at zero, for the kernel's configuration and the state's shapes.
+
+    ``init`` sets the warm-up schedule; the state's values are not used.
+    """
+    return nuts.init(jax.random.PRNGKey(0), settings.num_warmup, init_params=jnp.zeros(n),
+                     model_args=(), model_kwargs={})
+
+
 def _nuts_states(kwargs, settings: CollapsedSettings, n: int) -> list:
     """Shapes of every chain's state as :func:`_nuts_start` returns it (traced, not run)."""
     nuts = _nuts_kernel(kwargs, settings, jnp.eye(n) if settings.dense_mass else None)
-    one = jax.eval_shape(lambda: jax.tree.leaves(nuts.init(
-        jax.random.PRNGKey(0), settings.num_warmup, init_params=jnp.zeros(n), model_args=(),
-        model_kwargs={})))
+    one = jax.eval_shape(lambda: jax.tree.leaves(_nuts_init(nuts, settings, n)))
     return [jax.ShapeDtypeStruct((settings.num_chains,) + a.shape, a.dtype) for a in one]
 
 
@@ -560,11 +567,7 @@ def _nuts_advance(kwargs, settings: CollapsedSettings, n: int, n_dev: int, leave
     returned. ``leaves``: the states it will be called with (arrays, or their
     shapes and placement, :func:`_nuts_states`).
     """
-    n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
-
-    def init(nuts):    # the kernel's configuration (warm-up schedule) and the state's structure
-        return nuts.init(jax.random.PRNGKey(0), n_warm, init_params=jnp.zeros(n),
-                         model_args=(), model_kwargs={})
+    chunk = nuts_chunk(settings)
 
     def make_advance():
         info, unravel, _ = model_functions(kwargs)
@@ -572,10 +575,10 @@ def _nuts_advance(kwargs, settings: CollapsedSettings, n: int, n_dev: int, leave
         def advance(leaves):
             nuts = _nuts_kernel(kwargs, settings)
             # the states passed in carry the point and the adapted mass matrix
-            tree = jax.tree.structure(init(nuts))
+            tree = jax.tree.structure(_nuts_init(nuts, settings, n))
 
             def chain(state_leaves):
-                def step(s, _):       # adapts while s.i < n_warm (NumPyro's windowed adaptation)
+                def step(s, _):   # adapts while s.i < num_warmup (windowed adaptation)
                     s = nuts.sample(s, (), {})
                     return s, (s.z, s.diverging, s.num_steps)
 
