@@ -297,11 +297,20 @@ def test_arviz_and_matplotlib_are_not_imported_with_the_inference_core():
 
 def test_the_plotting_code_imports_without_jax():
     """The CLI's figure process imports only the plotting code; JAX's import (1.1 s)
-    would slow the fit running beside it (``ensure_x64`` imports JAX when called)."""
-    code = "import sys, bayeshopf.plotting; print('jax' in sys.modules)"
+    would slow the fit running beside it (``ensure_x64`` imports JAX when called).
+    Nor does a band's half-width import SciPy's statistics (about 1 s in the figure
+    process, for one quantile of the normal)."""
+    code = ("import sys, bayeshopf.plotting; print('jax' in sys.modules)\n"
+            "from bayeshopf.plotting._style import z_value\n"
+            "z = [z_value(c) for c in (0.5, 0.9, 0.975)]; print('scipy.stats' in sys.modules)\n"
+            "print(repr(z))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
-    assert out.stdout.strip() == "False"
+    jax_loaded, stats_loaded, values = out.stdout.strip().splitlines()
+    assert (jax_loaded, stats_loaded) == ("False", "False")
+    from scipy.stats import norm
+
+    assert eval(values) == [norm.ppf(0.5 + c / 2) for c in (0.5, 0.9, 0.975)]  # noqa: S307
 
 
 def _banana(monkeypatch):

@@ -202,7 +202,9 @@ def test_plot_phase_portraits(fitted, tmp_path) -> None:
     assert len(fig.axes) == len(rs)
     assert len(fig.legends) == 1
     for ax, rec in zip(fig.axes, rs, strict=True):
-        assert len(_by_gid(ax.lines, "orbit-draw")) == 12
+        (draws,) = _by_gid(ax.collections, "orbit-draws")      # one collection of 12 orbits
+        assert len(draws.get_segments()) == 12
+        assert all(np.array_equal(seg[0], seg[-1]) for seg in draws.get_segments())  # closed
         assert len(_by_gid(ax.lines, "orbit-median")) == 1
         assert len(_by_gid(ax.lines, "truth")) == 1
         (measured,) = _by_gid(ax.lines, "measured")
@@ -250,12 +252,14 @@ def test_plot_all_with_a_figure_process_writes_the_same_files(fitted, tmp_path) 
     """The figures drawn in the spawned worker are byte for byte those drawn here."""
     from bayeshopf.plotting import figure_worker
 
-    # without recordings (no phase portraits, no time series): the worker draws the
-    # predictive check and the frequency, this process the diagram
-    here = plot_all(fitted["fit"], None, tmp_path / "here", dpi=40)
+    # the worker draws the predictive check, the phase portraits (from orbits and a
+    # truth computed here) and the time series; this process the diagram and frequency
+    kw = dict(truth=fitted["truth"], dpi=40)
+    here = plot_all(fitted["fit"], fitted["rs"], tmp_path / "here", **kw)
     with figure_worker() as ex:
-        there = plot_all(fitted["fit"], None, tmp_path / "there", dpi=40, executor=ex)
+        there = plot_all(fitted["fit"], fitted["rs"], tmp_path / "there", executor=ex, **kw)
     assert [p.name for p in there] == [p.name for p in here]
+    assert "phase_portraits.png" in [p.name for p in there]
     for a, b in zip(here, there, strict=True):
         assert a.read_bytes() == b.read_bytes(), a.name
     assert sorted(os.listdir(tmp_path / "there")) == sorted(p.name for p in here)

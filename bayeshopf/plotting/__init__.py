@@ -30,7 +30,7 @@ from bayeshopf.data.recording import RecordingSet
 from bayeshopf.plotting._io import save_figure
 from bayeshopf.plotting._units import readable_length
 from bayeshopf.plotting.diagram import plot_bifurcation
-from bayeshopf.plotting.phase import plot_phase_portraits
+from bayeshopf.plotting.phase import draw_phase_panels, phase_panels, plot_phase_portraits
 from bayeshopf.plotting.ppc import coefficient_labels, plot_ppc
 from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
 
@@ -144,10 +144,12 @@ def plot_all(
             portraits and time series.
         executor: Optional :class:`concurrent.futures.Executor` (a process
             pool, :func:`figure_worker`) that draws and saves the predictive
-            check, the frequency and the time series while this process computes
-            and draws the others; Matplotlib's drawing holds the interpreter, so
-            a second process is what runs it beside the first (rig fit: the
-            figures stage of ``bayeshopf fit``, ``benchmarks/cli_speed.json``).
+            check, the phase portraits (their orbits computed here,
+            :func:`~bayeshopf.plotting.phase.phase_panels`) and the time series
+            while this process computes the bands and draws the diagram and
+            the frequency; Matplotlib's drawing holds the interpreter, so a second
+            process is what runs it beside the first (rig fit: the figures
+            stage of ``bayeshopf fit``, ``benchmarks/cli_speed.json``).
 
     Returns:
         The paths written, in the order of :data:`FIGURE_NAMES` (then
@@ -175,8 +177,14 @@ def plot_all(
         else:
             jobs[name] = executor.submit(_draw_and_save, builder, args, kwargs, paths[name], dpi)
 
+    orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
     draw(FIGURE_NAMES[2], plot_ppc, ppc, amplitude_units=fit.amplitude_units,
          amplitude_label=amp_label, length_unit=length_unit)
+    if recordings is not None:       # the orbits computed here, drawn by the executor
+        draw(FIGURE_NAMES[1], draw_phase_panels,
+             phase_panels(fit, recordings, truth=orbit_truth, offsets=offsets),
+             recordings.planar, recordings.units[:2], mu_units=recordings.mu_units,
+             offsets=offsets, **units)
     if fit.has_frequency:
         bands, pred = [], []
         branches = ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
@@ -187,26 +195,23 @@ def plot_all(
         measured = [(m, hz, "unstable" if u else "stable", se / (2 * np.pi))
                     for m, hz, u, se in zip(f.mu, f.frequency_hz, f.unstable, f.omega_se,
                                             strict=True)]
-        draw(FREQUENCY_FIGURE_NAMES[0], plot_frequency, bands, measured, predictive=pred,
-             mu_label=fit.mu_label, mu_units=fit.mu_units, ci=ci)
         if recordings is not None:
             draw(FREQUENCY_FIGURE_NAMES[1], plot_time_series,
                  fit.time_series_bands(recordings, ci=ci), mu_label=fit.mu_label,
                  mu_units=fit.mu_units, offsets=offsets, ci=ci, **units)
-    # the diagram (its truth is a function of a simulator) and the phase portraits
-    # (the fit's orbits) are drawn here
+    # the diagram (its truth is a function of a simulator) is drawn here, and the
+    # frequency after it: the two processes then take about as long as each other
     diagram = fit.diagram(mu, ci)
     amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
-    orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
     jobs[FIGURE_NAMES[0]] = save_figure(plot_bifurcation(
         diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
         amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
         zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit),
         paths[FIGURE_NAMES[0]], dpi=dpi)
-    if recordings is not None:
-        jobs[FIGURE_NAMES[1]] = save_figure(plot_phase_portraits(
-            fit, recordings, truth=orbit_truth, offsets=offsets, **units),
-            paths[FIGURE_NAMES[1]], dpi=dpi)
+    if fit.has_frequency:
+        jobs[FREQUENCY_FIGURE_NAMES[0]] = save_figure(plot_frequency(
+            bands, measured, predictive=pred, mu_label=fit.mu_label, mu_units=fit.mu_units,
+            ci=ci), paths[FREQUENCY_FIGURE_NAMES[0]], dpi=dpi)
     return [j if isinstance(j, Path) else j.result() for n in names if (j := jobs.get(n))]
 
 

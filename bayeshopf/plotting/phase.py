@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.legend_handler import HandlerTuple
 from matplotlib.lines import Line2D
@@ -58,6 +60,65 @@ def channel_label(name: str, units: str, removed: bool) -> str:
     return axis_label(f"Δ{name}" if removed else name, units)
 
 
+@dataclass(frozen=True)
+class PhasePanel:
+    """What one panel of :func:`plot_phase_portraits` shows, already computed (immutable).
+
+    Plain arrays, so that the panels can be drawn in another process
+    (:func:`~bayeshopf.plotting.plot_all`'s ``executor``). All in the recording's
+    units, with its mean already subtracted where offsets are removed.
+
+    Attributes:
+        mu: The recording's μ.
+        branch: ``"stable"`` or ``"unstable"``.
+        measured: The measured trajectory, ``(n_points, 2)`` (NaN rows at gaps).
+        draws: The posterior orbit draws shown, closed, ``(n_shown, N_PHI + 1, 2)``
+            (none where no draw has an orbit at this μ and branch).
+        median: Their pointwise median over every draw with an orbit, closed,
+            or ``None``.
+        true: The true orbit, closed, or ``None``.
+    """
+
+    mu: float
+    branch: str
+    measured: np.ndarray
+    draws: np.ndarray
+    median: np.ndarray | None
+    true: np.ndarray | None
+
+
+def phase_panels(
+    fit,
+    recordings: RecordingSet,
+    *,
+    n_orbits: int = 60,
+    max_points: int = 4000,
+    truth: OrbitTruth | None = None,
+    offsets: str = "remove",
+) -> list[PhasePanel]:
+    """The panels of :func:`plot_phase_portraits` (its arguments), one per recording."""
+    check_offsets(offsets)
+    out = []
+    for rec in recordings:
+        z = np.asarray(rec.planar(recordings.planar), float)
+        centre = z.mean(axis=0) if offsets == "remove" else np.zeros(2)
+        # broken where samples were left out (sensor dropouts), not joined across
+        measured = rec.trace(recordings.planar, max_points) - centre
+        draws = np.asarray(fit.orbits(rec.mu, rec.branch), float)
+        draws = draws[np.all(np.isfinite(draws), axis=(1, 2))] - centre
+        shown, median = np.zeros((0, draws.shape[1] + 1, 2)), None
+        if draws.shape[0]:
+            shown = _closed(draws[_pick(draws.shape[0], n_orbits)])
+            median = _closed(np.median(draws, axis=0))
+        true = None
+        if truth is not None:
+            t = np.asarray(truth(rec.mu, rec.branch), float)
+            if t.ndim == 2 and np.isfinite(t).all():
+                true = _closed(t - centre)
+        out.append(PhasePanel(float(rec.mu), rec.branch, measured, shown, median, true))
+    return out
+
+
 def plot_phase_portraits(
     fit,
     recordings: RecordingSet,
@@ -84,6 +145,9 @@ def plot_phase_portraits(
     ``Δz1``, ``Δz2``; sensor offsets of a rig (a heave of 0.6 m about which
     the orbit has millimetres) then no longer hide the orbits.
 
+    The panels' data are :func:`phase_panels`; :func:`draw_phase_panels` draws
+    them.
+
     Args:
         fit: A :class:`~bayeshopf.posterior.HybridPosterior`, or anything with
             ``orbits(mu, branch) -> draws (n, n_phi, 2)`` in physical units.
@@ -104,9 +168,43 @@ def plot_phase_portraits(
         The figure, one axes per recording (and the legend: the figure's for a
         new figure, the first axes' otherwise).
     """
+    data = phase_panels(fit, recordings, n_orbits=n_orbits, max_points=max_points,
+                        truth=truth, offsets=offsets)
+    return draw_phase_panels(data, recordings.planar, recordings.units[:2],
+                             mu_units=recordings.mu_units, n_orbits=n_orbits,
+                             mu_symbol=mu_symbol, offsets=offsets, length_unit=length_unit,
+                             angle_unit=angle_unit, ax=ax)
+
+
+def draw_phase_panels(
+    data: list[PhasePanel],
+    names: tuple[str, str],
+    units: tuple[str, str],
+    *,
+    mu_units: str = "",
+    n_orbits: int = 60,
+    mu_symbol: str = "μ",
+    offsets: str = "remove",
+    length_unit: str | None = None,
+    angle_unit: str | None = None,
+    ax=None,
+) -> Figure:
+    """Draw :func:`phase_panels`' panels (:func:`plot_phase_portraits`, whose arguments these are).
+
+    Args:
+        data: The panels.
+        names: The planar channels' names (z1, z2).
+        units: Their units.
+        mu_units: Unit of μ in the panel titles.
+        n_orbits: The number of draws named in the legend.
+        mu_symbol: Name of μ in the panel titles.
+        offsets: Whether the panels' offsets were ``"remove"``-d (the axis labels).
+        length_unit: Draw channels in a length unit in this one (``"mm"``, …).
+        angle_unit: Draw channels in an angle unit in this one (``"deg"``, …).
+        ax: Axes to draw into, one per panel; a new figure when ``None``.
+    """
     check_offsets(offsets)
-    recs = list(recordings)
-    n = len(recs)
+    n = len(data)
     ncols = min(MAX_COLUMNS, n)
     nrows = math.ceil(n / ncols)
 
@@ -117,51 +215,38 @@ def plot_phase_portraits(
 
     own = ax is None
     fig, axes = panels(ax, n, make)
-    names, units = recordings.planar, recordings.units
     scale = [convert(u, length_unit, angle_unit) for u in units[:2]]
     factor = np.array([scale[0][0], scale[1][0]])
     shown_units = (scale[0][1], scale[1][1])
-    mu_units = recordings.mu_units
     removed = offsets == "remove"
 
-    branches = {rec.branch for rec in recs}
-    for i, (rec, ax_i) in enumerate(zip(recs, axes, strict=False)):
+    branches = {p.branch for p in data}
+    truth = any(p.true is not None for p in data)
+    for i, (p, ax_i) in enumerate(zip(data, axes, strict=False)):
         col = i % ncols
         style_axes(ax_i)
         ax_i.minorticks_off()
-        colour = BRANCH_COLOURS[rec.branch]
-
-        z = np.asarray(rec.planar(recordings.planar), float)
-        centre = z.mean(axis=0) if removed else np.zeros(2)
-        # broken where samples were left out (sensor dropouts), not joined across
-        measured = (rec.trace(recordings.planar, max_points) - centre) * factor
+        colour = BRANCH_COLOURS[p.branch]
+        measured = p.measured * factor
         ax_i.plot(measured[:, 0], measured[:, 1], color=MEASURED_GREY, lw=0.5, alpha=0.8,
                   zorder=1, gid="measured")
-
-        draws = np.asarray(fit.orbits(rec.mu, rec.branch), float)
-        exists = np.all(np.isfinite(draws), axis=(1, 2))
-        draws = (draws[exists] - centre) * factor
-        if draws.shape[0]:
-            shown = _closed(draws[_pick(draws.shape[0], n_orbits)])
-            for orbit in shown:
-                ax_i.plot(orbit[:, 0], orbit[:, 1], color=colour, lw=0.4, alpha=0.15, zorder=2,
-                          gid="orbit-draw")
-            median = _closed(np.median(draws, axis=0))
+        if p.median is not None:
+            # one collection, not a line per draw: the same picture, a third of the time
+            ax_i.add_collection(LineCollection(p.draws * factor, colors=colour, linewidths=0.4,
+                                               alpha=0.15, zorder=2, gid="orbit-draws"))
+            median = p.median * factor
             ax_i.plot(median[:, 0], median[:, 1], color=colour, lw=1.8, zorder=3,
                       gid="orbit-median")
         else:
             ax_i.text(0.5, 0.5, "no predicted orbit", transform=ax_i.transAxes, ha="center",
                       va="center", fontsize=LEGEND_SIZE, color=colour)
-
-        if truth is not None:
-            true = np.asarray(truth(rec.mu, rec.branch), float)
-            if true.ndim == 2 and np.isfinite(true).all():
-                true = _closed((true - centre) * factor)
-                ax_i.plot(true[:, 0], true[:, 1], color="k", lw=0.7, ls="--", zorder=4,
-                          gid="truth")
+        if p.true is not None:
+            true = p.true * factor
+            ax_i.plot(true[:, 0], true[:, 1], color="k", lw=0.7, ls="--", zorder=4,
+                      gid="truth")
 
         unit = f" {mu_units}" if mu_units else ""
-        ax_i.set_title(f"{mu_symbol} = {_format_mu(rec.mu)}{unit}, {rec.branch}",
+        ax_i.set_title(f"{mu_symbol} = {_format_mu(p.mu)}{unit}, {p.branch}",
                        fontsize=TITLE_SIZE)
         if not own or i + ncols >= n:  # no panel below: label the x axis
             ax_i.set_xlabel(channel_label(names[0], shown_units[0], removed),
@@ -179,7 +264,7 @@ def plot_phase_portraits(
     ]
     labels = ["measured" + (" (Δ: its mean removed)" if removed else ""),
               f"posterior orbit draws ({n_orbits})", "pointwise posterior median"]
-    if truth is not None:
+    if truth:
         handles.append(Line2D([], [], color="k", lw=0.7, ls="--"))
         labels.append("true")
     where = dict(loc="outside lower center", ncol=len(handles)) if own else dict(loc="best")
