@@ -136,6 +136,16 @@ def test_out_of_library_effect_is_unexplained(flutter):
     assert any(r["significant"] for r in d["mismatch"]["by_recording"])
 
 
+def test_the_same_effect_is_the_same_system():
+    """Simulating with an effect and finding its truth ask for the system twice; the
+    second gets the first (cached), so the solvers traced for it serve both."""
+    vdp = get_system("vanderpol")
+    a = with_effect(vdp, "z1_cubic_stiffness", 0.05)
+    assert with_effect(vdp, "z1_cubic_stiffness", 0.05) is a
+    b = with_effect(vdp, "z1_cubic_stiffness", 0.1)
+    assert b is not a and (a.params["effect_value"], b.params["effect_value"]) == (0.05, 0.1)
+
+
 # ----------------------------------------------------------------------------- CLI
 
 

@@ -98,6 +98,21 @@ def test_vanderpol_cycle_matches_solve_ivp(vdp, mu):
     assert np.ptp(z1) == pytest.approx(orbit.amplitude["z1"], rel=1e-6)
 
 
+def test_parameter_copies_share_one_solver_and_keep_their_own_parameters(vdp):
+    """``System.with_params`` copies reuse the traced solver, which takes the parameters
+    as arguments: with c = 4 every orbit is the nominal one scaled by 1/√c = 1/2
+    (z → z/√c maps Van der Pol's equation with c onto the one with c = 1)."""
+    from bayeshopf.simulators.periodic import kernels, periodic_orbit
+
+    scaled = VANDERPOL.with_params(c=4.0)
+    assert kernels(scaled) is kernels(VANDERPOL)
+    a = orbit_at(vdp, 0.3, "stable")
+    b = periodic_orbit(scaled, 0.3, 0.6 * a.x0, 1.02 * a.period)   # Newton from a guess
+    assert b.period == pytest.approx(a.period, rel=1e-8)
+    # peak-to-peak over the sampled orbit: the samples fall at other phases
+    assert b.amplitude["z1"] == pytest.approx(a.amplitude["z1"] / 2, rel=1e-6)
+
+
 @pytest.mark.parametrize("mu", [0.01, 0.02, 0.03, 0.04, 0.05])
 def test_vanderpol_small_mu_closed_form(vdp, mu):
     # z1 = r cos θ, z2 = −r sin θ and averaging over θ turn ż2 = 2μ z2 − z1² z2 − z1 into

@@ -97,8 +97,14 @@ def _delayed_aero(system: System, value: float) -> System:
         param_units={**system.param_units, "delay_gain": "N m/rad", "delay_tau": "s"})
 
 
+@functools.lru_cache(maxsize=16)
 def with_effect(system: System, name: str, value: float) -> System:
     """``system`` with the hidden effect ``name`` of size ``value`` (module docstring).
+
+    The same arguments give the same system (cached), so its compiled solvers
+    (:func:`~bayeshopf.simulators.periodic.kernels`, per right-hand side) are
+    traced once: simulating the recordings and finding their truth's Hopf
+    point and fold ask for it twice.
 
     Raises:
         TermError: If ``name`` is not an effect of this system, or ``value`` is
