@@ -81,8 +81,7 @@ def kernels(system: System, rtol: float = RTOL, atol: float = ATOL) -> _Kernels:
     (:func:`param_tree`), so the copies of a system that differ in their
     parameter values only (``System.with_params``: the calibration's and the
     continuation's variants) share one traced and compiled solver. Tracing
-    diffrax's Dopri8 with the variational equations takes about 1 s, and one
-    ``bayeshopf discrepancy`` run traced it 37 times.
+    diffrax's Dopri8 with the variational equations takes about 1 s.
     """
     return _kernels(system.rhs, rtol, atol)
 
