@@ -1,9 +1,10 @@
-"""How long NUTS's chains must be: the default 4 × (500 + 500) against 4 × (250 + 250).
+"""How long NUTS's chains must be: the default 4 × (500 + 500) against shorter ones.
 
 Run: ``python benchmarks/bench_chain_length.py [--seeds 1 2 3 4]`` on an otherwise
 idle machine. On the rig and on the 3-DOF demo (``flutter_experiment(seed=0)``),
 from one MAP point each and with two CPU devices (as the CLI on 2 cores), NUTS
-runs at both lengths for each sampler seed, extended by 250 draws per chain
+runs at each length (the default, 4 × (250 + 250) and 4 × (500 + 250)) for
+each sampler seed, extended by 250 draws per chain
 while R̂ or bulk ESS of μ0, a2, μ_fold and w fails (R̂ ≤ 1.01, ESS ≥ 400), as
 the package does. Reports the draws per chain it ended with, R̂, ESS,
 divergences, the leapfrog steps (the cost, whatever the machine's load), the
@@ -26,7 +27,7 @@ import numpy as np
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 
-LENGTHS = {"500+500": (500, 500), "250+250": (250, 250)}
+LENGTHS = {"500+500": (500, 500), "250+250": (250, 250), "500+250": (500, 250)}
 
 
 def case(name, recordings, seeds):
