@@ -1,6 +1,7 @@
 """The sampler's setup: XLA's CPU flags, the stored compiled programs, the Laplace start of
 NUTS's mass matrix and the imports done beside it."""
 
+import json
 import os
 import subprocess
 import sys
@@ -92,15 +93,36 @@ def test_the_cli_limits_blas_threads_before_scipy_loads_its_openblas(tmp_path):
     assert out.strip().splitlines()[-1] == "['1']", out
 
 
-def test_blas_gets_one_thread_unless_the_user_chose(monkeypatch):
-    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
-    # this process has SciPy's linear algebra loaded already: too late, and it says so
-    with pytest.warns(RuntimeWarning, match="before importing the rest of bayeshopf"):
-        cache.configure_xla_cpu()
-    assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
-    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "4")
-    cache.configure_xla_cpu()
-    assert os.environ["OPENBLAS_NUM_THREADS"] == "4"
+_BLAS_LOADED = """
+import json
+import numpy, scipy.linalg      # NumPy's and SciPy's OpenBLAS load here, before the call
+from threadpoolctl import threadpool_info
+
+def threads():
+    return sorted(i["num_threads"] for i in threadpool_info() if i["internal_api"] == "openblas")
+
+before = threads()
+from bayeshopf.inference.cache import configure_xla_cpu
+configure_xla_cpu()
+print(json.dumps([before, threads()]))
+"""
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="OpenBLAS runs one thread on one core")
+@pytest.mark.parametrize("user", [None, "4"])
+def test_blas_gets_one_thread_unless_the_user_chose(user):
+    """Both OpenBLAS libraries, NumPy's and SciPy's, loaded before the call with
+    several threads (OpenBLAS reads OMP_NUM_THREADS when it has no limit of its
+    own, and caps it at the cores), get one, unless the user set OPENBLAS_NUM_THREADS."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    env["OMP_NUM_THREADS"] = "4"
+    if user is not None:
+        env["OPENBLAS_NUM_THREADS"] = user
+    out = subprocess.run([sys.executable, "-c", _BLAS_LOADED], env=env, capture_output=True,
+                         text=True, check=True).stdout.strip().splitlines()[-1]
+    before, after = json.loads(out)
+    assert len(before) == 2 and min(before) > 1, out
+    assert after == ([1, 1] if user is None else before), out
 
 
 def test_laplace_covariance_of_a_gaussian_potential_is_its_covariance():

@@ -6,13 +6,12 @@ import contextlib
 import hashlib
 import json
 import os
-import sys
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 import jax
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from bayeshopf._atomic import replacing
 
@@ -97,21 +96,22 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
       one per core it may use, up to four (the chains). With one thread per
       computation (above), one device computes on one core at a time.
 
-    It also sets ``OPENBLAS_NUM_THREADS=1`` (:data:`BLAS_THREADS`) unless the
-    user set it. jaxlib's Cholesky factorisations and triangular solves on CPU
-    call scipy's OpenBLAS, whose worker threads busy-wait between calls: on 2
-    cores the NUTS stage of the rig used two cores' CPU time for the wall time
-    of one, and the second core was not free for anything else
-    (``benchmarks/bench_xla_cpu_settings.py``). The matrices here are far too
-    small to gain from threads. OpenBLAS reads the limit once, when it loads,
-    and it loads with SciPy's linear algebra, which importing bayeshopf's
-    inference core imports: call this before those imports. Called after them,
-    it warns (RuntimeWarning) that the limit cannot take effect; on 2 cores the
-    busy-waiting threads made the CLI's NUTS stage 2–3 times slower with two
-    devices (``docs/inference_core.md``, "Stop 38").
+    It also gives OpenBLAS one thread unless the user set ``OPENBLAS_NUM_THREADS``:
+    it sets that variable to 1 (:data:`BLAS_THREADS`), which an OpenBLAS reads
+    when it loads, and limits those already loaded to one thread with
+    ``threadpoolctl``. There are two: NumPy's, loaded with NumPy (and so before
+    any caller can run this), which computes the features' least squares and the
+    bands' products, and SciPy's, loaded with its linear algebra, whose
+    Cholesky factorisations and triangular solves jaxlib calls on CPU. Their
+    worker threads busy-wait between calls, and the matrices here are far too
+    small to gain from them. On 2 cores SciPy's made the CLI's NUTS stage 2–3
+    times slower with two devices (``docs/inference_core.md``, "Stop 38");
+    NumPy's took the second core from the figure process while the CLI computed
+    features (0.86 s without a figure process, 1.15–1.27 s beside it with
+    NumPy's two threads, 0.96–1.01 s with one; "Stop 42").
 
-    Takes effect only before JAX's first computation in the process (the CLI and
-    the test suite call it first).
+    The XLA flags take effect only before JAX's first computation in the process
+    (the CLI and the test suite call this first).
 
     Args:
         host_devices: CPU devices wanted (1: JAX's default, no flag added).
@@ -119,12 +119,9 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     Returns:
         The flags of this function now in ``XLA_FLAGS``.
     """
-    if BLAS_THREADS[0] not in os.environ and "scipy.linalg" in sys.modules:
-        warnings.warn("configure_xla_cpu: SciPy's OpenBLAS was loaded before "
-                      f"{BLAS_THREADS[0]}={BLAS_THREADS[1]} could be set, so its threads are not "
-                      "limited; call configure_xla_cpu() before importing the rest of "
-                      "bayeshopf (in a notebook, in the first cell)", RuntimeWarning, stacklevel=2)
-    os.environ.setdefault(*BLAS_THREADS)
+    if BLAS_THREADS[0] not in os.environ:
+        os.environ[BLAS_THREADS[0]] = BLAS_THREADS[1]      # those that load from now on
+        threadpool_limits(int(BLAS_THREADS[1]), user_api="blas")   # those loaded already
     flags = os.environ.get("XLA_FLAGS", "")
     wanted = [SINGLE_THREAD_EIGEN]
     if _jaxlib_version() >= (0, 10):
