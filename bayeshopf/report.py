@@ -88,12 +88,26 @@ def _write_json(obj, path: Path) -> None:
     path.write_text(json.dumps(json_ready(obj), indent=2, allow_nan=False) + "\n")
 
 
-def _draw_figures(figures, stage: Path) -> dict:
+def _draw_figures(figures, stage: Path, meanwhile) -> dict:
+    """Run ``figures(folder)`` and ``meanwhile()``; the figures' wall time.
+
+    ``figures`` may return a function that waits for figures still being drawn
+    elsewhere (:func:`bayeshopf.plotting.start_figures`): ``meanwhile`` then runs
+    before that wait, while they finish, and the figures' time, to the last one
+    written, includes it. Otherwise ``meanwhile`` runs after the figures.
+    """
     if figures is None:
+        meanwhile()
         return {}
     (stage / FIGURES).mkdir()
     t0 = time.perf_counter()
-    figures(stage / FIGURES)
+    pending = figures(stage / FIGURES)
+    if not callable(pending):
+        spent = time.perf_counter() - t0
+        meanwhile()
+        return {"figures": spent}
+    meanwhile()
+    pending()
     return {"figures": time.perf_counter() - t0}
 
 
@@ -210,8 +224,11 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
         post: The :class:`~bayeshopf.posterior.HybridPosterior`.
         out: The output folder.
         force: Replace bayeshopf's files in a non-empty folder (others are kept).
-        figures: Optional callable ``figures(folder) -> list[Path]`` that draws
-            the figures into a folder (its time is recorded in the summary).
+        figures: Optional callable ``figures(folder)`` that draws the figures
+            into a folder and returns their paths, or a function that waits
+            for them (:func:`~bayeshopf.plotting.start_figures`: ``model.json``
+            and ``posterior.nc`` are then written before it is called, while a
+            figure process finishes). Its time is recorded in the summary.
         ppc: The posterior predictive check, if already computed (at level ``ci``).
         extra_summary: More keys for ``summary.json``.
         ci: Mass of the summary's intervals (:func:`summary_hybrid`).
@@ -221,8 +238,12 @@ def save_hybrid(post, out: str | os.PathLike[str], *, force: bool = False, figur
     """
     def write(stage: Path) -> None:
         post.dispatch()     # posterior.nc's log-likelihood computes beside the figures
-        timed = replace(post, timings={**post.timings, **_draw_figures(figures, stage)})
+        # model.json and posterior.nc are written while a figure process finishes
+        timed = replace(post, timings={**post.timings,
+                                       **_draw_figures(figures, stage, lambda: files(stage))})
         _write_json(summary_hybrid(timed, ppc, extra_summary, ci), stage / SUMMARY)
+
+    def files(stage: Path) -> None:
         mp = post.map_point
         model = {"core": COLLAPSED_CORE, "spec": post.spec.to_dict(),
                  "predictive_se": np.median(post.features.coeffs_se, axis=0).tolist(),

@@ -302,11 +302,11 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
     ppc = post.ppc(args.ci)
     figures = None
     if not args.no_figures:
-        from bayeshopf.plotting import plot_all
+        from bayeshopf.plotting import start_figures
 
-        def figures(folder):
-            return plot_all(post, rs, folder, truth=truth, zoom=truth is not None, ci=args.ci,
-                            executor=worker)
+        def figures(folder):   # returns while the figure process finishes
+            return start_figures(post, rs, folder, truth=truth, zoom=truth is not None,
+                                 ci=args.ci, executor=worker)
 
     report.save_hybrid(post, out, force=args.force, figures=figures, ppc=ppc,
                        extra_summary=extra, ci=args.ci)

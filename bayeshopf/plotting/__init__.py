@@ -20,6 +20,7 @@ time series are drawn about each recording's mean (``offsets="remove"``);
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import Executor
 from pathlib import Path
 
@@ -47,6 +48,7 @@ __all__ = [
     "plot_ppc",
     "plot_time_series",
     "save_figure",
+    "start_figures",
 ]
 
 #: File names written by :func:`plot_all`, in order.
@@ -156,6 +158,52 @@ def plot_all(
         :data:`FREQUENCY_FIGURE_NAMES`), less those that need recordings when
         there are none.
     """
+    return start_figures(fit, recordings, out_dir, truth, zoom=zoom, dpi=dpi, fmt=fmt, ci=ci,
+                         length_unit=length_unit, angle_unit=angle_unit, offsets=offsets,
+                         executor=executor)()
+
+
+def start_figures(
+    fit,
+    recordings: RecordingSet | None,
+    out_dir: str | os.PathLike[str],
+    truth=None,
+    *,
+    zoom: bool = True,
+    dpi: int = 150,
+    fmt: str = "png",
+    ci: float = 0.9,
+    length_unit: str | None = "auto",
+    angle_unit: str | None = None,
+    offsets: str = "remove",
+    executor: Executor | None = None,
+) -> Callable[[], list[Path]]:
+    """:func:`plot_all`, returning before the figures an executor draws are written.
+
+    The figures drawn in this process are written when it returns; the returned
+    function waits for the executor's and returns every path, as :func:`plot_all`
+    does. The CLI writes ``posterior.nc`` in between, while the figure process
+    finishes (``bayeshopf.report.save_hybrid``).
+
+    Args:
+        fit: The fit (:func:`plot_all`).
+        recordings: Its recordings, or ``None``.
+        out_dir: Destination folder.
+        truth: Optional planted system.
+        zoom: Add the diagram's inset.
+        dpi: Resolution of raster files.
+        fmt: ``"png"``, ``"pdf"`` or ``"svg"``.
+        ci: Level of the bands and intervals.
+        length_unit: Unit of lengths (or ``"auto"``).
+        angle_unit: Unit of angles.
+        offsets: ``"remove"`` or ``"keep"`` the recordings' means.
+        executor: The executor that draws the predictive check, the phase
+            portraits and the time series, or ``None`` (all drawn here).
+
+    Returns:
+        A function without arguments that returns :func:`plot_all`'s paths once
+        every figure is written (it raises what a figure's drawing raised).
+    """
     if fmt not in ("png", "pdf", "svg"):
         raise ValueError(f"fmt must be 'png', 'pdf' or 'svg'; got {fmt!r}")
     out = Path(out_dir)
@@ -212,7 +260,11 @@ def plot_all(
         jobs[FREQUENCY_FIGURE_NAMES[0]] = save_figure(plot_frequency(
             bands, measured, predictive=pred, mu_label=fit.mu_label, mu_units=fit.mu_units,
             ci=ci), paths[FREQUENCY_FIGURE_NAMES[0]], dpi=dpi)
-    return [j if isinstance(j, Path) else j.result() for n in names if (j := jobs.get(n))]
+
+    def written() -> list[Path]:
+        return [j if isinstance(j, Path) else j.result() for n in names if (j := jobs.get(n))]
+
+    return written
 
 
 def _draw_and_save(builder, args, kwargs, path, dpi) -> Path:
