@@ -8,6 +8,7 @@ no traceback; ``--debug`` shows the traceback of unexpected errors.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import sys
 import textwrap
@@ -560,5 +561,20 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_ERROR
 
 
+def run() -> None:
+    """The console script ``bayeshopf``: :func:`main`, then exit with its code.
+
+    Before the interpreter's teardown it moves every object to the garbage
+    collector's permanent generation (:func:`gc.freeze`), so that the teardown's
+    collections do not trace the heap of JAX, NumPyro, Matplotlib and ArviZ once
+    more. Every file is written and closed by then, and the exit handlers still
+    run. A warm rig fit's process ended 0.53–0.63 s after :func:`main` returned
+    without it, 0.13 s with it (``docs/inference_core.md``, "Stop 42").
+    """
+    code = main()
+    gc.freeze()
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -147,9 +147,9 @@ def plot_all(
         executor: Optional :class:`concurrent.futures.Executor` (a process
             pool, :func:`figure_worker`) that draws and saves the predictive
             check, the phase portraits (their orbits computed here,
-            :func:`~bayeshopf.plotting.phase.phase_panels`) and the time series
-            while this process computes the bands and draws the diagram and
-            the frequency; Matplotlib's drawing holds the interpreter, so a second
+            :func:`~bayeshopf.plotting.phase.phase_panels`), the time series
+            and the frequency while this process computes the bands and draws
+            the diagram; Matplotlib's drawing holds the interpreter, so a second
             process is what runs it beside the first (rig fit: the figures
             stage of ``bayeshopf fit``, ``benchmarks/cli_speed.json``).
 
@@ -247,8 +247,10 @@ def start_figures(
             draw(FREQUENCY_FIGURE_NAMES[1], plot_time_series,
                  fit.time_series_bands(recordings, ci=ci), mu_label=fit.mu_label,
                  mu_units=fit.mu_units, offsets=offsets, ci=ci, **units)
-    # the diagram (its truth is a function of a simulator) is drawn here, and the
-    # frequency after it: the two processes then take about as long as each other
+        draw(FREQUENCY_FIGURE_NAMES[0], plot_frequency, bands, measured, predictive=pred,
+             mu_label=fit.mu_label, mu_units=fit.mu_units, ci=ci)
+    # the diagram (its truth is a function of a simulator) is drawn here; the CLI
+    # then writes posterior.nc while the executor finishes (report.save_hybrid)
     diagram = fit.diagram(mu, ci)
     amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
     jobs[FIGURE_NAMES[0]] = save_figure(plot_bifurcation(
@@ -256,10 +258,6 @@ def start_figures(
         amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
         zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit),
         paths[FIGURE_NAMES[0]], dpi=dpi)
-    if fit.has_frequency:
-        jobs[FREQUENCY_FIGURE_NAMES[0]] = save_figure(plot_frequency(
-            bands, measured, predictive=pred, mu_label=fit.mu_label, mu_units=fit.mu_units,
-            ci=ci), paths[FREQUENCY_FIGURE_NAMES[0]], dpi=dpi)
 
     def written() -> list[Path]:
         return [j if isinstance(j, Path) else j.result() for n in names if (j := jobs.get(n))]
