@@ -672,12 +672,13 @@ def amplitude_of(spec: cm.CollapsedSpec, coeffs) -> np.ndarray:
     K = (np.shape(coeffs)[-1] - 1) // 2
     z1_coeffs = np.asarray(spec.frame.L)[0] @ np.asarray(coeffs)        # (..., 2K+1)
     design = phase_design(phi, K).T                                       # (2K+1, 256)
-    if z1_coeffs.ndim < 2:
+    if z1_coeffs.ndim < 3:
         z1 = z1_coeffs @ design
         return z1.max(axis=-1) - z1.min(axis=-1)
-    # a few leading rows at a time: the orbits of every draw at every μ at once
-    # (500 × 120 × 256 values for a diagram's band) cost more in fresh memory
-    # than in arithmetic; the same products, so the same values
+    # a few draws at a time: the orbits of every draw at every μ at once (500 ×
+    # 120 × 256 values for a diagram's band) cost more in fresh memory than in
+    # arithmetic. The product is batched over the leading axis, one matrix
+    # product per draw either way, so the values are the same
     out = np.empty(z1_coeffs.shape[:-1])
     step = max(1, _CHUNK_POINTS // (int(np.prod(z1_coeffs.shape[1:-1])) * phi.size))
     for i in range(0, z1_coeffs.shape[0], step):

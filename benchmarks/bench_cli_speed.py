@@ -11,7 +11,8 @@ off by default (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true``), and writes
 ``benchmarks/cli_speed_fusion_emitters.json``. ``--label L`` writes
 ``benchmarks/cli_speed_L.json`` instead: with ``PYTHONPATH`` naming a checkout of
 another commit (``git worktree add``), the CLI runs that commit's code, so two
-versions can be timed in turns on the same machine.
+versions can be timed in turns on the same machine (``BAYESHOPF_EXE`` names the
+console script to run, where that commit's entry point is not the installed one).
 """
 
 import json
@@ -24,7 +25,9 @@ from pathlib import Path
 
 HERE = Path(__file__).parent
 RIG = HERE.parent.parent / "shared/data/flutter_cbc"
-EXE = str(Path(sys.executable).with_name("bayeshopf"))
+# the console script beside this Python; BAYESHOPF_EXE names another (a commit
+# whose entry point differs from the installed one's, timed through PYTHONPATH)
+EXE = os.environ.get("BAYESHOPF_EXE") or str(Path(sys.executable).with_name("bayeshopf"))
 
 
 def timed(args, cache, xla_flags):

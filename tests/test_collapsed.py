@@ -203,6 +203,25 @@ def test_amplitude_is_the_peak_to_peak_of_z1_in_physical_units():
     assert np.isnan(amplitude_of(SimpleNamespace(frame=frame), c)[0, 0])
 
 
+@pytest.mark.parametrize("shape", [(7, 5, 2, 9), (301, 1, 2, 9), (5, 3, 4, 2, 9)])
+def test_amplitude_in_chunks_equals_one_product(monkeypatch, shape):
+    """A diagram's band reconstructs its orbits a few draws at a time; the values
+    are those of one product over every draw, bit for bit."""
+    from types import SimpleNamespace
+
+    import bayeshopf.posterior as bp
+
+    spec = SimpleNamespace(frame=PlanarFrame(np.array([0.6, 0.7]),
+                                             np.array([[0.02, 0.01], [0.05, 0.3]])))
+    c = np.random.default_rng(4).standard_normal(shape)
+    monkeypatch.setattr(bp, "_CHUNK_POINTS", 1 << 40)        # one chunk
+    whole = bp.amplitude_of(spec, c)
+    monkeypatch.setattr(bp, "_CHUNK_POINTS", 2 * 256 * int(np.prod(shape[1:-2])))
+    chunked = bp.amplitude_of(spec, c)                       # two rows a chunk
+    assert chunked.shape == shape[:-2]
+    np.testing.assert_array_equal(chunked, whole)
+
+
 def test_extrapolation_sd_is_the_gaussian_process_conditional():
     """Zero at the data, the one-point closed form √(1 − e^{−d²/ℓ²}), 1 far away or without data."""
     ell = 0.8

@@ -225,3 +225,36 @@ def test_cli_plot_redraws_into_the_fit_folder(saved, tmp_path, capsys) -> None:
     assert main(["plot", str(fit_dir), "--length-unit", "furlong"]) == 2
     assert "--length-unit furlong" in capsys.readouterr().err
     assert main(["plot", str(tmp_path / "none")]) == 2
+
+
+def test_files_are_written_while_pending_figures_finish(tmp_path, monkeypatch) -> None:
+    """``save_hybrid``'s figures stage: a ``figures`` that returns a waiter (figures
+    still drawn by another process) has ``meanwhile`` (model.json, posterior.nc)
+    run before the wait, inside the figures' time; one that returns its paths has
+    it run after, outside their time. A clock that moves only when told."""
+    clock, order = [0.0], []
+    monkeypatch.setattr(report.time, "perf_counter", lambda: clock[0])
+
+    def step(name, seconds):
+        order.append(name)
+        clock[0] += seconds
+
+    def pending(folder):
+        step("figures", 1.0)
+        return lambda: step("wait", 2.0)
+
+    def done(folder):
+        step("figures", 1.0)
+        return [folder / "x.png"]
+
+    for name in "abc":
+        (tmp_path / name).mkdir()
+    timings = report._draw_figures(pending, tmp_path / "a", lambda: step("files", 5.0))
+    assert order == ["figures", "files", "wait"] and timings == {"figures": 8.0}
+    assert (tmp_path / "a" / report.FIGURES).is_dir()
+    order.clear()
+    timings = report._draw_figures(done, tmp_path / "b", lambda: step("files", 5.0))
+    assert order == ["figures", "files"] and timings == {"figures": 1.0}
+    order.clear()
+    assert report._draw_figures(None, tmp_path / "c", lambda: step("files", 5.0)) == {}
+    assert order == ["files"]
