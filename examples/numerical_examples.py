@@ -27,8 +27,8 @@ from pathlib import Path
 
 from bayeshopf.inference.cache import configure_xla_cpu
 
-# before the other imports, as the CLI does: SciPy's OpenBLAS (loaded with them)
-# reads its thread limit once, and JAX's CPU flags apply before its first work
+# before the other imports, as the CLI does: JAX's CPU flags apply before its
+# first work (it also limits NumPy's and SciPy's OpenBLAS to one thread)
 configure_xla_cpu()
 
 import bayeshopf as bh

@@ -533,9 +533,9 @@ def main(argv: list[str] | None = None) -> int:
         from bayeshopf._x64 import ensure_x64
         from bayeshopf.inference.cache import configure_xla_cpu, enable_compilation_cache
 
-        # before anything loads SciPy's OpenBLAS (importing the inference core
-        # does): one BLAS thread, whose busy-waiting workers would otherwise take
-        # the cores from NUTS's devices (bayeshopf.inference.cache)
+        # one OpenBLAS thread (NumPy's and SciPy's), whose busy-waiting workers
+        # would otherwise take the cores from NUTS's devices, set before the
+        # inference core's import loads SciPy's (bayeshopf.inference.cache)
         configure_xla_cpu()
         from bayeshopf.inference.collapsed import CollapsedSettings
 
