@@ -198,7 +198,8 @@ def start_figures(
         angle_unit: Unit of angles.
         offsets: ``"remove"`` or ``"keep"`` the recordings' means.
         executor: The executor that draws the predictive check, the phase
-            portraits and the time series, or ``None`` (all drawn here).
+            portraits, the time series and the frequency, or ``None`` (all
+            drawn here).
 
     Returns:
         A function without arguments that returns :func:`plot_all`'s paths once
