@@ -485,7 +485,10 @@ class HybridPosterior:
         ``relative``: RMS distance over the orbit (frame units), relative to the
         measured orbit's RMS radius; ``spread``: the segments' RMS distance from
         their mean orbit, relative to the same radius; ``ok``: relative below
-        :data:`ORBIT_ERROR_MAX` or below :data:`ORBIT_SPREAD_FACTOR` × spread.
+        :data:`ORBIT_ERROR_MAX` or below :data:`ORBIT_SPREAD_FACTOR` × spread;
+        ``by_harmonic``: the part of ``relative`` in the centre and in each
+        harmonic 1…K (:func:`orbit_error_parts`; their squares add up to
+        ``relative``'s).
         """
         f = self.features
         phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
@@ -495,14 +498,45 @@ class HybridPosterior:
             data = reconstruct(f.coeffs[i], phi)
             radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
             if c.shape[0] == 0:
-                out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False})
+                out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False,
+                            "by_harmonic": None})
                 continue
-            model = reconstruct(np.median(c, axis=0), phi)
+            median = np.median(c, axis=0)
+            model = reconstruct(median, phi)
             rel = float(np.sqrt(np.mean(np.sum((model - data) ** 2, -1)))) / radius
             spread = float(f.segment_rms[i]) / radius
             out.append({"name": f.names[i], "relative": rel, "spread": spread,
-                        "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread)})
+                        "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread),
+                        "by_harmonic": (orbit_error_parts(median, f.coeffs[i]) / radius).tolist()})
         return out
+
+
+def orbit_error_parts(model, data) -> np.ndarray:
+    r"""The RMS distance between two orbits, split into the centre and each harmonic.
+
+    For orbits given by their coefficients ``[a_0, a_1..a_K, b_1..b_K]`` on each
+    axis, shape ``(2, 2K+1)``, Parseval's identity over one period gives the
+    mean squared distance as
+
+    .. math::  \overline{|Δz(φ)|^2} = \sum_{axes} \Big[Δa_0^2
+               + \tfrac12 \sum_{k=1}^{K} (Δa_k^2 + Δb_k^2)\Big],
+
+    so the parts ``e_0 = (Σ Δa_0²)^{1/2}`` and ``e_k = (½ Σ (Δa_k² + Δb_k²))^{1/2}``
+    have squares that add up to the squared RMS distance.
+
+    Returns:
+        ``(e_0, e_1, …, e_K)``, in the coefficients' units.
+    """
+    d = np.asarray(model, float) - np.asarray(data, float)
+    K = (d.shape[-1] - 1) // 2
+    parts = [np.sum(d[:, 0] ** 2)]
+    parts += [0.5 * np.sum(d[:, k] ** 2 + d[:, K + k] ** 2) for k in range(1, K + 1)]
+    return np.sqrt(np.array(parts))
+
+
+def harmonic_name(k: int) -> str:
+    """``"the centre"``, ``"the fundamental"``, ``"harmonic k"``."""
+    return {0: "the centre", 1: "the fundamental"}.get(k, f"harmonic {k}")
 
 
 def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
@@ -746,9 +780,14 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         if not e["ok"]:
             rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
             spread = "n/a" if e["spread"] is None else f"{100 * e['spread']:.1f}%"
+            where = ""
+            if e.get("by_harmonic"):
+                k = int(np.argmax(e["by_harmonic"]))
+                part = 100 * e["by_harmonic"][k]
+                where = f"; the largest part in {harmonic_name(k)}, {part:.1f}%"
             warnings.append(f"fit: {e['name']}: orbit error {rel} of its size (limit "
                             f"{100 * ORBIT_ERROR_MAX:.0f}% or {ORBIT_SPREAD_FACTOR:g}× its "
-                            f"segment spread {spread})")
+                            f"segment spread {spread}){where}")
     for name, c in zip(post.features.names, covered, strict=True):
         if not c:
             warnings.append(f"fit: {name}: measured amplitude outside its 90% predictive band")

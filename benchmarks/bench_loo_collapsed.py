@@ -27,19 +27,11 @@ def _maps():
     return len(p.read_text().splitlines()) if p.exists() else None
 
 
-def main(unfolding="curved"):
-    from bayeshopf.inference.cache import configure_xla_cpu
-
-    configure_xla_cpu()    # before any JAX work, as the CLI does
-    from bayeshopf.data import load_recordings
+def held_out_rows(f, settings) -> list[dict]:
+    """Hold out each recording of features ``f`` in turn, refit, and band it (module docstring)."""
     from bayeshopf.diagnostics.summaries import interval
-    from bayeshopf.features.harmonics import extract_harmonics
-    from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
 
-    rs = load_recordings(HERE.parent.parent / "shared/data/flutter_cbc")
-    f = extract_harmonics(rs)
-    settings = replace(CollapsedSettings(), unfolding=unfolding)
     rows = []
     for i in range(f.n_recordings):
         keep = [j for j in range(f.n_recordings) if j != i]
@@ -70,6 +62,20 @@ def main(unfolding="curved"):
         print(f"{r['name']:24s} measured {1e3 * r['measured']:6.2f} mm  band "
               f"{np.round(1e3 * np.array(r['band']), 2).tolist() if r['band'] else None} "
               f"{'inside' if r['inside'] else 'OUTSIDE'}", flush=True)
+    return rows
+
+
+def main(unfolding="curved"):
+    from bayeshopf.inference.cache import configure_xla_cpu
+
+    configure_xla_cpu()    # before any JAX work, as the CLI does
+    from bayeshopf.data import load_recordings
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference.collapsed import CollapsedSettings
+
+    rs = load_recordings(HERE.parent.parent / "shared/data/flutter_cbc")
+    f = extract_harmonics(rs)
+    rows = held_out_rows(f, replace(CollapsedSettings(), unfolding=unfolding))
     for key, what in (("", "with the model error away from the data (default)"),
                       ("_without_extrapolation", "without it")):
         n_in = sum(r["inside" + key] for r in rows)

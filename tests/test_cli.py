@@ -263,7 +263,8 @@ def test_fit_writes_summary_posterior_figures(fitted, good_data):
     diag = s["diagnostics"]
     assert diag["posterior"]["method"] == "svi" and "elbo_plateau" in diag["posterior"]
     assert [e["name"] for e in s["orbit_error"]] == [r["file"] for r in s["recordings"]]
-    assert all(set(r["orbit_error"]) == {"relative", "spread", "ok"} for r in s["recordings"])
+    assert all(set(r["orbit_error"]) == {"relative", "spread", "ok", "by_harmonic"}
+               for r in s["recordings"])
     assert (fitted / "posterior.nc").stat().st_size > 1000
     pngs = sorted(p.name for p in (fitted / "figures").glob("*.png"))
     assert pngs == sorted(["bifurcation.png", "phase_portraits.png", "ppc.png", "frequency.png",

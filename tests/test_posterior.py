@@ -7,8 +7,9 @@ import pytest
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.data.synthetic import demo_system
+from bayeshopf.features.harmonics import reconstruct
 from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.posterior import fit_hybrid
+from bayeshopf.posterior import fit_hybrid, orbit_error_parts
 
 SETTINGS = replace(CollapsedSettings.fast(), num_chains=2)
 
@@ -153,3 +154,21 @@ def test_fit_auto_compares_both_normal_forms_by_exact_conditional_loo(planted):
     assert ev["elpd_preferred"] == "subcritical" and ev["z"] > 2
     assert set(ev["loo"]) == {"subcritical", "supercritical"}
     assert ev["branch_labels"] == "used by the subcritical model only"
+
+
+def test_orbit_error_parts_add_up_and_find_a_planted_harmonic():
+    """Parseval's split against the distance sampled over the orbit, and a planted difference."""
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((2, 2, 9))          # two orbits, K = 4, on two axes
+    phi = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    sampled = np.sqrt(np.mean(np.sum((reconstruct(a, phi) - reconstruct(b, phi)) ** 2, -1)))
+    parts = orbit_error_parts(a, b)
+    assert parts.shape == (5,)
+    assert np.sqrt(np.sum(parts**2)) == pytest.approx(sampled, rel=1e-12)
+    # a difference in the second harmonic only (a2 of axis 0, b2 of axis 1)
+    c = a.copy()
+    c[0, 2] += 0.3
+    c[1, 6] -= 0.4
+    parts = orbit_error_parts(c, a)
+    assert parts[2] == pytest.approx(np.sqrt(0.5 * (0.3**2 + 0.4**2)), rel=1e-12)
+    assert np.all(np.delete(parts, 2) == 0)
