@@ -18,7 +18,13 @@ parts, on the 7 recordings in ``../shared/data/flutter_cbc``:
    circle of radius r has a second harmonic of order r², so ``h2/h1`` of the
    smaller orbit of a pair is at most about ``r_u/r_s`` times the larger
    one's (``r_u/r_s`` from ``x``); measured ``h2/h1`` of ``w1`` for both.
-4. **Profiles of the held-out failures.** The log joint density maximised over
+4. **The map without its prior.** At the fit's normal form (posterior medians
+   of μ0, the fold and ``w``), the map's coefficients by weighted least
+   squares (weights 1/se, no prior), with all 46 basis functions per channel
+   (for 63 numbers) and with groups of them left out: how close the model
+   class can come to each orbit with the Hopf point and the fold where they
+   are.
+5. **Profiles of the held-out failures.** The log joint density maximised over
    every other site with the fold's gap (or the Hopf point's gap) held at each
    value of a grid (NumPyro's ``condition``; L-BFGS-B from the deterministic
    start and two jittered ones), on the recordings without the unstable 14.9
@@ -122,6 +128,43 @@ def part_harmonics(f):
     return rows
 
 
+def part_least_squares(post):
+    import jax.numpy as jnp
+
+    import bayeshopf.model.collapsed as cm
+    from bayeshopf.features.harmonics import reconstruct
+    from bayeshopf.posterior import orbit_error_parts
+
+    f = post.features
+    theta = {k: jnp.asarray(np.median(np.asarray(post.samples[k])))
+             for k in ("mu0", "mu_fold", "w_unfold", "a2")}
+    sign = np.where(f.unstable, -1.0, 1.0)
+    Phi = np.asarray(cm.design(post.spec, jnp.asarray(f.mu), jnp.asarray(sign), theta))
+    n, m, J = Phi.shape
+    names = cm.basis_names(post.spec)
+    net = np.array([nm.startswith("nn") for nm in names])
+    mu2 = np.array(["m^2" in nm for nm in names])
+    groups = {"all": ~np.zeros(J, bool), "polynomial only": ~net,
+              "without the mu^2 terms": ~mu2, "polynomial without the mu^2 terms": ~net & ~mu2}
+    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    radius = [np.sqrt(np.mean(np.sum((o - o.mean(0)) ** 2, -1)))
+              for o in (reconstruct(c, phi) for c in f.coeffs)]
+    out = {}
+    for label, keep in groups.items():
+        P = Phi[:, :, keep].reshape(n * m, -1)
+        pred = np.empty_like(f.coeffs)
+        for c in range(2):
+            w = 1.0 / f.coeffs_se[:, c].reshape(-1)
+            beta = np.linalg.lstsq(P * w[:, None], f.coeffs[:, c].reshape(-1) * w, rcond=None)[0]
+            pred[:, c] = (P @ beta).reshape(n, m)
+        parts = [orbit_error_parts(pred[i], f.coeffs[i]) / radius[i] for i in range(n)]
+        out[label] = {"n_basis": int(keep.sum()),
+                      "orbit_error": {f.names[i]: float(np.sqrt(np.sum(p**2)))
+                                      for i, p in enumerate(parts)},
+                      "by_harmonic": {f.names[i]: p.tolist() for i, p in enumerate(parts)}}
+    return {"theta": {k: float(v) for k, v in theta.items()}, "groups": out}
+
+
 def profile(f, site, values, drop):
     """The profile over the fold (``site="gap_fold"``) or μ0 (``"gap_hopf"``) at ``values``."""
     import jax
@@ -184,6 +227,7 @@ def main():
     post = fit_hybrid(f, "subcritical", seed=0, progress=False)
     out["orbits"] = part_orbits(post)
     out["second_harmonics"] = part_harmonics(f)
+    out["least_squares"] = part_least_squares(post)
     folds = (14.85, 14.7, 14.5, 14.3, 14.1, 13.9, 13.6)
     hopfs = (16.6, 16.9, 17.2, 17.7, 18.2, 18.7, 19.2)
     out["profiles"] = [profile(f, "gap_fold", folds, "CBC_unstable_v14_9.mat"),
