@@ -65,8 +65,8 @@ def test_the_warning_says_where_the_unfitted_orbit_misses(post):
 @pytest.mark.xfail(strict=True, reason=(
     "issue 19: the unstable 16.5 m/s orbit, the smallest (19.5 mm) and next to the Hopf point, is "
     "missed by 7.8–8.0% of its size against a 2.7% segment spread (seed 0): the pitch–heave phase "
-    "of its fundamental, and harmonics no smooth map of the circle gives at its size "
-    "(docs/validation.md, README Limits)"))
+    "of its fundamental and its harmonics; the posterior prefers a model error to the curvature "
+    "in μ of the map that this one orbit needs (docs/validation.md, README Limits)"))
 def test_the_unstable_orbit_next_to_the_hopf_point_is_fitted(post):
     e = next(e for e in post.diagnostics["fit"]["orbit_error"] if e["name"] == UNFITTED)
     assert e["ok"], e
