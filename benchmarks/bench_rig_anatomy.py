@@ -1,7 +1,7 @@
 """Where the rig's fit misses, and what drives its held-out failures.
 
-Run: ``python benchmarks/bench_rig_anatomy.py`` (about 4 min on 2 cores).
-Writes ``benchmarks/rig_anatomy.json``; ``docs/validation.md`` cites it. Four
+Run: ``python benchmarks/bench_rig_anatomy.py`` (about 1 min on 2 cores).
+Writes ``benchmarks/rig_anatomy.json``; ``docs/validation.md`` cites it. Five
 parts, on the 7 recordings in ``../shared/data/flutter_cbc``:
 
 1. **The curved unfolding through the three pairs.** The pair invariant
@@ -14,10 +14,12 @@ parts, on the 7 recordings in ``../shared/data/flutter_cbc``:
    error of ``HybridPosterior.orbit_error`` split into the centre and each
    harmonic (their squares add up to the square of the total), and the
    fundamental's ratio and phase of ``w2`` to ``w1``, measured and predicted.
-3. **Second harmonics against a smooth map.** At one μ a smooth map of the
-   circle of radius r has a second harmonic of order r², so ``h2/h1`` of the
-   smaller orbit of a pair is at most about ``r_u/r_s`` times the larger
-   one's (``r_u/r_s`` from ``x``); measured ``h2/h1`` of ``w1`` for both.
+3. **Second harmonics against the map's quadratic terms.** At one μ they make
+   a second harmonic ∝ r² on the circle of radius r, so ``h2/h1`` of the
+   smaller orbit of a pair would be ``r_u/r_s`` times the larger one's
+   (``r_u/r_s`` from ``x``; ``smooth_map_bound`` in the file, a leading-order
+   value: part 4 shows the network's features can give more); measured
+   ``h2/h1`` of ``w1`` for both.
 4. **The map without its prior.** At the fit's normal form (posterior medians
    of μ0, the fold and ``w``), the map's coefficients by weighted least
    squares (weights 1/se, no prior), with all 46 basis functions per channel
