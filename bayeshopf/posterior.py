@@ -781,10 +781,10 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
             rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
             spread = "n/a" if e["spread"] is None else f"{100 * e['spread']:.1f}%"
             where = ""
-            if e.get("by_harmonic"):
-                k = int(np.argmax(e["by_harmonic"]))
-                part = 100 * e["by_harmonic"][k]
-                where = f"; the largest part in {harmonic_name(k)}, {part:.1f}%"
+            if e["by_harmonic"] is not None:
+                parts = e["by_harmonic"]
+                k = int(np.argmax(parts))
+                where = f"; the largest part in {harmonic_name(k)}, {100 * parts[k]:.1f}%"
             warnings.append(f"fit: {e['name']}: orbit error {rel} of its size (limit "
                             f"{100 * ORBIT_ERROR_MAX:.0f}% or {ORBIT_SPREAD_FACTOR:g}× its "
                             f"segment spread {spread}){where}")

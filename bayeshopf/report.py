@@ -168,8 +168,8 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
             "frequency_hz": float(f.frequency_hz[i]),
             "frequency_predicted": freq[i]["predicted"] if freq else None,
             "frequency_inside_ci90": freq[i]["inside_ci90"] if freq else None,
-            "orbit_error": {k: errors[name].get(k) for k in ("relative", "spread", "ok",
-                                                             "by_harmonic")},
+            "orbit_error": {k: errors[name][k] for k in ("relative", "spread", "ok",
+                                                         "by_harmonic")},
         })
 
     def iv(name):

@@ -1,6 +1,6 @@
 """Where the rig's fit misses, and what drives its held-out failures.
 
-Run: ``python benchmarks/bench_rig_anatomy.py`` (about 1 min on 2 cores).
+Run: ``python benchmarks/bench_rig_anatomy.py`` (20 s on 2 cores with a warm cache).
 Writes ``benchmarks/rig_anatomy.json``; ``docs/validation.md`` cites it. Five
 parts, on the 7 recordings in ``../shared/data/flutter_cbc``:
 
@@ -82,29 +82,23 @@ def part_pairs(f):
 
 
 def part_orbits(post):
-    from bayeshopf.features.harmonics import reconstruct
-
+    """``HybridPosterior.orbit_error`` with the predicted amplitude and the pitch–heave shape."""
     f = post.features
     K = post.spec.n_harmonics
-    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    ppc = post.ppc()
+
+    def shape(c):
+        z1, z2 = c[0, 1] + 1j * c[0, K + 1], c[1, 1] + 1j * c[1, K + 1]
+        return {"ratio": float(abs(z2 / z1)), "phase_deg": float(np.angle(z2 / z1, deg=True))}
+
     rows = []
-    for i, c in enumerate(post.training_coefficients):
+    for i, (e, c) in enumerate(zip(post.orbit_error(), post.training_coefficients, strict=True)):
         model = np.median(c[np.all(np.isfinite(c), axis=(1, 2))], axis=0)
-        data = f.coeffs[i]
-        orbit = reconstruct(data, phi)
-        radius = np.sqrt(np.mean(np.sum((orbit - orbit.mean(0)) ** 2, -1)))
-        d = model - data
-        parts = [np.sum(d[:, 0] ** 2)] + [0.5 * np.sum(d[:, k] ** 2 + d[:, K + k] ** 2)
-                                           for k in range(1, K + 1)]
-
-        def shape(c):
-            z1, z2 = c[0, 1] + 1j * c[0, K + 1], c[1, 1] + 1j * c[1, K + 1]
-            return {"ratio": float(abs(z2 / z1)), "phase_deg": float(np.angle(z2 / z1, deg=True))}
-
-        rows.append({"name": f.names[i], "mu": float(f.mu[i]), "unstable": bool(f.unstable[i]),
-                     "total": float(np.sqrt(sum(parts)) / radius),
-                     "by_harmonic": [float(np.sqrt(p) / radius) for p in parts],
-                     "w2_over_w1_measured": shape(data), "w2_over_w1_model": shape(model)})
+        rows.append({"name": e["name"], "mu": float(f.mu[i]), "unstable": bool(f.unstable[i]),
+                     "total": e["relative"], "by_harmonic": e["by_harmonic"],
+                     "amplitude_measured": float(f.amplitude[i]),
+                     "amplitude_predicted": ppc.predictive[i].to_json(),
+                     "w2_over_w1_measured": shape(f.coeffs[i]), "w2_over_w1_model": shape(model)})
     return rows
 
 
@@ -173,7 +167,7 @@ def profile(f, site, values, drop):
     import jax.numpy as jnp
     from jax.flatten_util import ravel_pytree
     from numpyro import handlers
-    from numpyro.infer.util import init_to_value, initialize_model
+    from numpyro.infer.util import constrain_fn, init_to_value, initialize_model, potential_energy
     from scipy.optimize import minimize
 
     import bayeshopf.inference.collapsed as ci
@@ -188,23 +182,30 @@ def profile(f, site, values, drop):
     grid = [spec.mu_min - v if site == "gap_fold" else v - spec.mu_unstable_max for v in values]
     factors = ("marginal_0", "marginal_1", "marginal_omega", "w_unfold", "gap_fold", "gap_hopf",
                "tau_mu", "tau_shape", "sigma", "sigma_rel", "sigma_omega")
+    info = initialize_model(jax.random.PRNGKey(0),
+                            handlers.condition(cm.collapsed_model, {site: jnp.asarray(grid[0])}),
+                            model_kwargs=kw, init_strategy=init_to_value(values=start),
+                            validate_grad=False)
+    x0, unravel = ravel_pytree(info.param_info.z)
+
+    def potential(x, g):       # one program for the whole grid: the held value is an argument
+        model = handlers.condition(cm.collapsed_model, {site: g})
+        return potential_energy(model, (), kw, unravel(x))
+
+    vg = jax.jit(jax.value_and_grad(potential))
     rows = []
     for g in grid:
-        model = handlers.condition(cm.collapsed_model, {site: jnp.asarray(g)})
-        info = initialize_model(jax.random.PRNGKey(0), model, model_kwargs=kw,
-                                init_strategy=init_to_value(values=start), validate_grad=False)
-        x0, unravel = ravel_pytree(info.param_info.z)
-        vg = jax.jit(jax.value_and_grad(lambda x, info=info, unravel=unravel:
-                                        info.potential_fn(unravel(x))))
         best = None
         for k in range(3):
             xs = np.asarray(x0) + (0.0 if k == 0 else
                                    0.3 * np.random.default_rng(k).standard_normal(x0.shape))
-            r = minimize(lambda x, vg=vg: tuple(np.asarray(a, float) for a in vg(jnp.asarray(x))),
+            r = minimize(lambda x, g=g: tuple(np.asarray(a, float)
+                                              for a in vg(jnp.asarray(x), jnp.asarray(g))),
                          xs, jac=True, method="L-BFGS-B", options={"maxiter": 2000})
             if best is None or r.fun < best.fun:
                 best = r
-        cons = info.postprocess_fn(unravel(jnp.asarray(best.x)))
+        model = handlers.condition(cm.collapsed_model, {site: jnp.asarray(g)})
+        cons = constrain_fn(model, (), kw, unravel(jnp.asarray(best.x)), return_deterministic=True)
         tr = handlers.trace(handlers.substitute(model, data=cons)).get_trace(**kw)
         parts = {n: float(jnp.sum(s["fn"].log_prob(s["value"]))) for n, s in tr.items()
                  if s["type"] == "sample" and n in factors}
