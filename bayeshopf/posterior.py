@@ -128,15 +128,24 @@ class HybridPosterior:
     def _draw_indices(self, n: int | None) -> np.ndarray:
         return draw_indices(self.run.betas.shape[0], n)
 
-    def orbit_coefficients(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
+    def orbit_coefficients(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
+                           control=None):
         """Harmonic coefficients of the predicted orbits in the frame, ``(n, n_mu, 2, 2K+1)``.
 
         The model orbit at μ, projected on the K harmonics the data have
-        (``nan`` where the branch does not exist in a draw).
+        (``nan`` where the branch does not exist in a draw); with ``control``
+        ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
+        that control, else the uncontrolled system's.
         """
         idx = self._draw_indices(n_draws)
         return orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                                  self.run.betas[idx], mu, branch_sign(branch))
+                                  self.run.betas[idx], mu, branch_sign(branch), control=control)
+
+    def recording_control(self, i: int):
+        """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""
+        if self.spec.control_scale is None or self.features.control is None:
+            return None
+        return np.asarray(self.features.control)[i][None]
 
     def _noise_sd(self, coeffs, coeffs_se=None):
         """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``."""
@@ -145,9 +154,14 @@ class HybridPosterior:
         return noise_sd(coeffs, np.asarray(self.samples["sigma"])[idx],
                         np.asarray(self.samples["sigma_rel"])[idx], se)
 
-    def orbits(self, mu: float, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
-        """Predicted orbits in physical units at one μ, ``(n, N_PHI, 2)``."""
-        c = self.orbit_coefficients([mu], branch, n_draws)[:, 0]
+    def orbits(self, mu: float, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
+               control=None):
+        """Predicted orbits in physical units at one μ, ``(n, N_PHI, 2)``.
+
+        ``control`` ``(1, 2)``: a recording's control fundamental
+        (:meth:`recording_control`), for the orbit as it was held.
+        """
+        c = self.orbit_coefficients([mu], branch, n_draws, control=control)[:, 0]
         phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
         return self.spec.frame.from_frame(reconstruct(c, phi))
 
@@ -155,15 +169,16 @@ class HybridPosterior:
         return amplitude_of(self.spec, coeffs)
 
     def amplitude(self, mu, branch: str = "stable", predictive: bool = False,
-                  coeffs_se=None) -> np.ndarray:
+                  coeffs_se=None, control=None) -> np.ndarray:
         """Amplitude draws (peak-to-peak of z1) at μ, ``(n, n_mu)``; ``nan`` where no LCO.
 
         ``predictive=True`` gives a new recording's amplitude: the model's
         coefficients plus Gaussian noise with the model error σ and the
         standard error ``coeffs_se`` (by default the training recordings'
-        median).
+        median). ``control`` ``(n_mu, 2)``: a new recording's measured control
+        fundamental (:meth:`orbit_coefficients`).
         """
-        c = self.orbit_coefficients(mu, branch)
+        c = self.orbit_coefficients(mu, branch, control=control)
         if predictive:
             c = self._away_from_data(c, mu, branch)
             rng = np.random.default_rng(self.seed)
@@ -181,6 +196,29 @@ class HybridPosterior:
         mu_data = f.mu[f.unstable == (branch == "unstable")]
         return scale_orbits(coeffs, extrapolation_factor(mu, mu_data, self.spec.mu_span,
                                                          np.shape(coeffs)[0], self.seed))
+
+    def control_gain(self, ci: float = CI) -> dict | None:
+        """The orbits' response to the control's fundamental, or ``None`` without the term.
+
+        ``gain``: the median and ``ci`` interval of the real and imaginary parts
+        of ``H``, the response of the second frame axis ``w2`` (frame units per
+        unit of the control channel; :mod:`bayeshopf.model.collapsed`, "Control");
+        ``prior_sd``: their prior sd; ``response``: per recording, the median of
+        ``|H U_i|`` relative to the measured fundamental of ``w2``.
+        """
+        spec = self.spec
+        if spec.control_scale is None:
+            return None
+        h = np.asarray(self.run.betas)[:, spec.n_map:, 1]                   # (n, 2): w2's
+        gain = {part: interval(h[:, j], ci).to_json() for j, part in enumerate(("re", "im"))}
+        u = np.asarray(self.features.control)                               # (n_rec, 2)
+        resp = np.abs((h[:, :1] + 1j * h[:, 1:]) * (u[:, 0] - 1j * u[:, 1])[None])
+        K = spec.n_harmonics
+        c = self.features.coeffs[:, 1]
+        rel = np.median(resp, axis=0) / np.hypot(c[:, 1], c[:, K + 1])
+        return {"axis": "w2", "prior_sd": float(spec.control_scale), "gain": gain,
+                "units": "frame units per unit of the control channel",
+                "response": {name: float(rel[i]) for i, name in enumerate(self.features.names)}}
 
     # ----------------------------------------------------------------- frequency
     @property
@@ -342,7 +380,8 @@ class HybridPosterior:
         """
         f = self.features
         return tuple(
-            self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable")[:, 0]
+            self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable",
+                                    control=self.recording_control(i))[:, 0]
             for i in range(f.n_recordings))
 
     def ppc(self, ci: float = CI) -> PosteriorPredictiveCheck:
@@ -422,7 +461,9 @@ class HybridPosterior:
           with the same coordinates;
         * ``constant_data``: ``mu``, ``unstable`` (1 for the unstable branch),
           ``coeffs_se``, ``amplitude_sd``, ``n_segments``, ``segment_rms``,
-          ``frequency_se`` (Hz) of each recording.
+          ``frequency_se`` (Hz) of each recording and, where the recordings name a
+          control channel, ``control`` (its fundamental ``u_a1``, ``u_b1`` on the
+          features' time origin, over ``control_part``).
 
         Coordinates: ``recording`` (names), ``frame_axis`` (``w1``, ``w2``, with
         the planar ``channel`` each follows: z = centre + L w with L lower
@@ -469,6 +510,10 @@ class HybridPosterior:
         constant = {"mu": f.mu, "unstable": f.unstable.astype(int), "coeffs_se": f.coeffs_se,
                     "amplitude_sd": f.amplitude_sd, "n_segments": f.n_segments,
                     "segment_rms": f.segment_rms, "frequency_se": f.omega_se / (2 * np.pi)}
+        if f.control is not None:
+            constant["control"] = np.asarray(f.control, float)
+            dims["control"] = ["recording", "control_part"]
+            coords["control_part"] = ["u_a1", "u_b1"]
         attrs = {"criticality": self.criticality, "seed": self.seed, "mu_label": self.mu_label,
                  "mu_units": self.mu_units, "amplitude_units": self.amplitude_units,
                  "planar_channels": list(self.spec.frame.names),
@@ -568,7 +613,7 @@ def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
 
 
 def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: float, *,
-                       per_draw: bool = False):
+                       per_draw: bool = False, control=None):
     """Predicted orbits' harmonic coefficients, ``(n, n_mu, 2, 2K+1)``, for draws ``(θ, β)``.
 
     Args:
@@ -579,6 +624,10 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
             shape ``(n, n_mu)`` (e.g. each draw's own fold).
         sign: +1 stable, −1 unstable.
         per_draw: Whether ``mu`` holds one row of μ per draw.
+        control: The control's fundamental ``(u_a, u_b)`` at each μ, ``(n_mu, 2)``:
+            the orbit as that control holds it (the response ``H U`` of
+            :mod:`bayeshopf.model.collapsed`, "Control", with ``β``'s last two
+            rows as ``h``); ``None``: the uncontrolled system's.
     """
     ensure_x64()
     n = np.shape(betas)[0]
@@ -586,8 +635,12 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
     th = {k: jnp.asarray(v) for k, v in theta.items()}
     # stored (inference.cache.compiled_call): a warm process neither traces nor lowers it
-    return np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
+    c = np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
         th, jnp.asarray(betas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+    if control is None or spec.control_scale is None:
+        return c
+    cols = np.asarray(cm.control_columns(spec, np.asarray(control, float)))  # (n_mu, 2K+1, 2)
+    return c + np.einsum("mkj,njc->nmck", cols, np.asarray(betas)[:, spec.n_map:, :])
 
 
 def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float, *,
@@ -670,7 +723,8 @@ def predictive_draws(spec: cm.CollapsedSpec, theta: dict, betas, gammas,
         if idx.size == 0:
             continue
         sign = normal_form.UNSTABLE if unstable else normal_form.STABLE
-        coeffs[:, idx] = orbit_coefficients(spec, theta, betas, f.mu[idx], sign)
+        u = None if f.control is None else np.asarray(f.control)[idx]
+        coeffs[:, idx] = orbit_coefficients(spec, theta, betas, f.mu[idx], sign, control=u)
         if gammas is not None:
             freq[:, idx] = frequency_draws(spec, theta, gammas, f.mu[idx], sign)
     sd = np.stack([noise_sd(coeffs[:, i], theta["sigma"], theta["sigma_rel"], f.coeffs_se[i])
@@ -842,7 +896,7 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     t0 = time.perf_counter()
     spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
                          unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
-                         frequency=settings.frequency)
+                         frequency=settings.frequency, control=settings.control)
     kwargs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

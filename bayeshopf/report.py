@@ -170,6 +170,8 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
             "frequency_inside_ci90": freq[i]["inside_ci90"] if freq else None,
             "orbit_error": {k: errors[name][k] for k in ("relative", "spread", "ok",
                                                          "by_harmonic")},
+            "control_fundamental": (None if f.control is None
+                                    else np.asarray(f.control[i], float).tolist()),
         })
 
     def iv(name):
@@ -186,6 +188,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
         "amplitude_definition": "peak-to-peak of z1 over the orbit, from its K-harmonic "
         "reconstruction",
         "planar_channels": list(post.spec.frame.names),
+        "control": post.control_gain(ci),
         "recordings": recs,
         "orbit_error": [errors[n] for n in f.names],
         "ppc": {f"amplitudes_{inside}": int(ppc.covered.sum()),
@@ -428,7 +431,8 @@ def _rebuild(saved: SavedHybrid):
         amplitude=np.asarray(obs["amplitude"].values, float),
         amplitude_sd=np.asarray(const["amplitude_sd"].values, float),
         frame=spec.frame, n_harmonics=spec.n_harmonics,
-        names=tuple(str(n) for n in obs["recording"].values))
+        names=tuple(str(n) for n in obs["recording"].values),
+        control=np.asarray(const["control"].values, float) if "control" in const else None)
     post_ds = idata.posterior
     chains = {k: np.asarray(v.values) for k, v in post_ds.data_vars.items()
               if k not in ("beta", "gamma")}
@@ -511,7 +515,7 @@ def _recordings_in_fit_order(saved: SavedHybrid, recordings):
                             f"{r.mu:g}, {r.branch}")
         recs.append(r)
     return RecordingSet(tuple(recs), planar=rs.planar, mu_label=rs.mu_label,
-                        mu_units=rs.mu_units, extra=rs.extra)
+                        mu_units=rs.mu_units, extra=rs.extra, control=rs.control)
 
 
 def redraw_figures(saved: SavedHybrid, recordings=None, out_dir=None, *,

@@ -249,35 +249,42 @@ def map_coefficients(post: HybridPosterior, theta: dict | None = None) -> np.nda
     """
     th = {k: jnp.asarray(v[0]) for k, v in (theta or map_theta(post)).items()}
     f = post.features
+    control = None if post.spec.control_scale is None else jnp.asarray(f.control)
     return np.asarray(cm.map_mean(post.spec, th, jnp.asarray(f.mu),
                                   jnp.asarray(np.where(f.unstable, -1.0, 1.0)),
-                                  jnp.asarray(f.coeffs), jnp.asarray(f.coeffs_se)))
+                                  jnp.asarray(f.coeffs), jnp.asarray(f.coeffs_se), control))
 
 
-def plug_in_coefficients(post: HybridPosterior, mu, branch: str) -> np.ndarray:
-    """Harmonic coefficients of the MAP plug-in orbit at μ, ``(n_mu, 2, 2K+1)``; ``nan``: no LCO."""
+def plug_in_coefficients(post: HybridPosterior, mu, branch: str, control=None) -> np.ndarray:
+    """Harmonic coefficients of the MAP plug-in orbit at μ, ``(n_mu, 2, 2K+1)``; ``nan``: no LCO.
+
+    ``control`` ``(n_mu, 2)``: the control's fundamental there (``None``: uncontrolled).
+    """
     sign = branch_sign(branch)
     if branch == "unstable" and post.criticality != "subcritical":
         return np.full((np.size(mu), 2, 2 * post.spec.n_harmonics + 1), np.nan)
     theta = map_theta(post)
     beta = map_coefficients(post, theta)
-    return orbit_coefficients(post.spec, theta, beta[None], np.atleast_1d(mu), sign)[0]
+    return orbit_coefficients(post.spec, theta, beta[None], np.atleast_1d(mu), sign,
+                              control=control)[0]
 
 
-def plug_in_amplitude(post: HybridPosterior, mu, branch: str = "stable") -> np.ndarray:
+def plug_in_amplitude(post: HybridPosterior, mu, branch: str = "stable",
+                      control=None) -> np.ndarray:
     """The MAP plug-in amplitude (peak-to-peak of z1) at μ, ``(n_mu,)``; ``nan`` where no LCO."""
-    return amplitude_of(post.spec, plug_in_coefficients(post, mu, branch))
+    return amplitude_of(post.spec, plug_in_coefficients(post, mu, branch, control))
 
 
 def plug_in_band(post: HybridPosterior, mu: float, branch: str, coeffs_se=None, *,
-                 n_draws: int = N_PLUG_IN_DRAWS, seed: int | None = None) -> np.ndarray:
+                 n_draws: int = N_PLUG_IN_DRAWS, seed: int | None = None,
+                 control=None) -> np.ndarray:
     """Amplitude draws of a new measurement under the plug-in, ``(n_draws,)``.
 
     ``c + N(0, se² + σ̂_c² + (σ̂_rel c)²)`` with ``c`` the plug-in orbit at μ and
     ``σ̂`` the MAP's noise scales (no parameter uncertainty, no model error away
     from the data); ``coeffs_se`` defaults to the training recordings' median.
     """
-    c = plug_in_coefficients(post, [mu], branch)                          # (1, 2, 2K+1)
+    c = plug_in_coefficients(post, [mu], branch, control)                 # (1, 2, 2K+1)
     p = post.map_point.params
     se = np.median(post.features.coeffs_se, axis=0) if coeffs_se is None else coeffs_se
     sd = noise_sd(c[None], np.asarray(p["sigma"])[None], np.asarray(p["sigma_rel"])[None], se)
@@ -295,8 +302,10 @@ def _triple(post: HybridPosterior, name: str) -> tuple[float, float, float]:
     return _NAN3 if iv is None else (iv.median, iv.lo, iv.hi)
 
 
-def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) -> HeldOut:
-    amp = post.amplitude([mu], branch, predictive=True, coeffs_se=coeffs_se)[:, 0]
+def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
+                      control) -> HeldOut:
+    amp = post.amplitude([mu], branch, predictive=True, coeffs_se=coeffs_se,
+                         control=control)[:, 0]
     ok = np.isfinite(amp)
     iv = interval(amp[ok]) if ok.any() else None
     return HeldOut(median=iv.median if iv else np.nan, lo=iv.lo if iv else np.nan,
@@ -304,9 +313,10 @@ def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) 
                    mu_fold=_triple(post, "mu_fold"), mu0=_triple(post, "mu0"))
 
 
-def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) -> HeldOut:
-    point = float(plug_in_amplitude(post, [mu], branch)[0])
-    band = plug_in_band(post, mu, branch, coeffs_se)
+def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
+                    control) -> HeldOut:
+    point = float(plug_in_amplitude(post, [mu], branch, control)[0])
+    band = plug_in_band(post, mu, branch, coeffs_se, control=control)
     band = band[np.isfinite(band)]
     lo, hi = np.quantile(band, [(1 - CI) / 2, (1 + CI) / 2]) if band.size else (np.nan, np.nan)
     p = post.map_point.params
@@ -317,7 +327,7 @@ def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se) ->
 
 
 def predict_held_out(post: HybridPosterior, method: str, mu: float, branch: str,
-                     coeffs_se=None) -> HeldOut:
+                     coeffs_se=None, control=None) -> HeldOut:
     """Prediction of a new recording at ``(μ, branch)`` by ``method`` (``"bayes"`` or ``"map"``).
 
     Args:
@@ -327,11 +337,13 @@ def predict_held_out(post: HybridPosterior, method: str, mu: float, branch: str,
         branch: ``"stable"`` or ``"unstable"``.
         coeffs_se: Its coefficients' standard errors in ``post``'s frame
             ``(2, 2K+1)`` (default: the training recordings' median).
+        control: Its measured control fundamental ``(1, 2)`` (a CBC recording,
+            with the model's control term), or ``None``.
     """
     if method == "bayes":
-        return _bayes_prediction(post, mu, branch, coeffs_se)
+        return _bayes_prediction(post, mu, branch, coeffs_se, control)
     if method == "map":
-        return _map_prediction(post, mu, branch, coeffs_se)
+        return _map_prediction(post, mu, branch, coeffs_se, control)
     raise FitError(f"method must be one of {METHODS}; got {method!r}")
 
 
@@ -393,7 +405,8 @@ def leave_one_out(
         post = fit_hybrid(features.subset(keep), criticality, seed=seed, settings=settings,
                           progress=False)
         mu, branch = float(features.mu[i]), "unstable" if features.unstable[i] else "stable"
-        preds = {m: predict_held_out(post, m, mu, branch, features.coeffs_se[i])
+        control = None if features.control is None else features.control[i][None]
+        preds = {m: predict_held_out(post, m, mu, branch, features.coeffs_se[i], control)
                  for m in methods}
         out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
                         measured_sd=float(features.amplitude_sd[i]), predictions=preds,

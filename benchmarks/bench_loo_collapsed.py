@@ -43,7 +43,8 @@ def held_out_rows(f, settings) -> list[dict]:
         bands = {}
         for on in (True, False):     # with and without the model error away from the data
             p = replace(post, settings=replace(post.settings, extrapolation=on))
-            amp = p.amplitude([f.mu[i]], branch, predictive=True, coeffs_se=f.coeffs_se[i])[:, 0]
+            amp = p.amplitude([f.mu[i]], branch, predictive=True, coeffs_se=f.coeffs_se[i],
+                              control=None if f.control is None else f.control[i][None])[:, 0]
             ok = np.isfinite(amp)
             bands[on] = (interval(amp[ok]) if ok.any() else None), float(ok.mean())
         (iv, p_exists), (iv0, _) = bands[True], bands[False]

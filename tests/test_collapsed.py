@@ -1,5 +1,7 @@
 """The collapsed model's algebra against direct computations (scipy, closed forms)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -82,6 +84,41 @@ def test_design_is_the_projection_of_the_mapped_circle():
         w = cm.orbit(spec, theta, beta, mu[i], sign[i], phi)
         coeffs = cm.projection(3, 64) @ w                       # (2K+1, 2)
         np.testing.assert_allclose(Phi[i] @ beta, coeffs, atol=1e-12)
+
+
+def test_control_columns_are_the_complex_gain_times_the_control():
+    """Φ's control columns give Δ(a₁ − i b₁) = H u (u = u_a − i u_b), and the orbit in
+    phase (``cm.orbit`` with the control) is the same response."""
+    spec = dataclasses.replace(_spec(), control_scale=5.0)
+    assert spec.n_basis == spec.n_map + 2 and cm.basis_names(spec)[-2:] == list(cm.CONTROL_TERMS)
+    theta = {"mu0": 17.0, "mu_fold": 14.5, "a2": 2.0 * np.sqrt(2.5), "w_unfold": 0.0}
+    mu, sign = jnp.array([15.5, 16.0]), jnp.array([1.0, -1.0])
+    u = np.array([[0.3, -0.2], [-0.1, 0.4]])
+    rng = np.random.default_rng(3)
+    beta = jnp.asarray(rng.standard_normal((spec.n_basis, 2)))
+    H = np.asarray(beta[-2] + 1j * beta[-1])                     # per channel
+    free = np.asarray(cm.design(spec, mu, sign, theta, n_phi=64) @ beta)
+    assert np.isfinite(free).all()
+    held = np.asarray(cm.design(spec, mu, sign, theta, n_phi=64, control=u) @ beta)
+    K = spec.n_harmonics
+    delta = held - free                                            # (n, 2K+1, 2)
+    for i in range(2):
+        got = delta[i, 1] - 1j * delta[i, K + 1]
+        np.testing.assert_allclose(got, H * (u[i, 0] - 1j * u[i, 1]), atol=1e-12)
+        others = np.delete(delta[i], [1, K + 1], axis=0)
+        assert np.abs(others).max() == 0.0
+        # the same orbit sampled in phase, then projected
+        phi = jnp.linspace(0, 2 * jnp.pi, 64, endpoint=False)
+        w = cm.orbit(spec, theta, beta, mu[i], sign[i], phi, control=jnp.asarray(u[i]))
+        np.testing.assert_allclose(cm.projection(K, 64) @ w, held[i], atol=1e-12)
+    # the response is w2's: w1's design has zeros in the control columns
+    w1, w2 = cm.channel_designs(spec, mu, sign, theta, control=u)
+    assert np.all(np.asarray(w1)[:, spec.n_map:] == 0)
+    np.testing.assert_array_equal(np.asarray(w2), np.asarray(
+        cm.design(spec, mu, sign, theta, control=u)).reshape(-1, spec.n_basis))
+    # the prior sd of the gain's two parts is the spec's
+    sd = np.asarray(cm.prior_sd(spec, 0.1, 0.1))
+    assert sd.shape == (spec.n_basis,) and np.all(sd[-2:] == 5.0)
 
 
 def test_log_marginal_derivatives_hold_when_the_measurement_errors_are_small():

@@ -56,6 +56,29 @@ def test_recovers_planted_coefficients_with_honest_standard_errors():
     assert 0.7 < ratio < 1.6
 
 
+def test_control_fundamental_is_on_the_features_time_origin():
+    """A control channel u(t) = A cos(ω(t + t0) + ψ), with z1's crest at t = −t0: after the
+    alignment its fundamental is A(cos ψ, −sin ψ); without a control channel it is None."""
+    rng = np.random.default_rng(4)
+    t = np.arange(int(12.0 * 400.0)) / 400.0
+    recs, truth = [], []
+    for i, (amp, psi) in enumerate(((0.3, 0.4), (0.05, -2.0), (0.2, 2.9))):
+        t0 = rng.uniform(0, 0.4)
+        r = _record(1.0 + i, t, 0.01, rng, t0=t0)
+        u = amp * np.cos(OMEGA * (t + t0) + psi) + 0.01 * rng.standard_normal(t.size)
+        recs.append(Recording(t, {**r.channels, "u": u}, {}, r.mu, "stable", name=r.name))
+        truth.append([amp * np.cos(psi), -amp * np.sin(psi)])
+    rs = RecordingSet(tuple(recs), ("x", "y"), control="u")
+    f = extract_harmonics(rs, n_harmonics=2, frame=IDENTITY)
+    np.testing.assert_allclose(f.control, truth, atol=2e-3)
+    assert f.subset([2, 0]).control.tolist() == f.control[[2, 0]].tolist()
+    assert extract_harmonics(RecordingSet(tuple(recs), ("x", "y")), n_harmonics=2).control is None
+    with pytest.raises(DataError, match="control channel 'x' expected apart from the planar"):
+        RecordingSet(tuple(recs), ("x", "y"), control="x")
+    with pytest.raises(DataError, match="r1.0: control channel 'v' expected"):
+        RecordingSet(tuple(recs), ("x", "y"), control="v")
+
+
 def test_single_segment_record_has_a_standard_error():
     # 2 s at 2.5 Hz: five periods, one segment, no spread to measure
     f = extract_harmonics(_set(2.0, 1000.0, 0.02), n_harmonics=2, frame=IDENTITY,

@@ -75,6 +75,7 @@ def test_flutter_cbc_is_one_builtin_description():
     assert (rig.sample_rate, rig.data_rows, rig.mu_variable) == (5000.0, 5, "Wind_sped")
     assert rig.planar == ("h", "alpha") and (rig.mu_label, rig.mu_units) == ("airspeed", "m/s")
     assert rig.mu_from_name("CBC_stable_v15_6.mat") == 15.6
+    assert rig.control == "actuator" and ch["actuator"].row == 2
     # read from the packaged TOML, which is also an example for users
     import bayeshopf.data
 
@@ -121,6 +122,10 @@ BAD_DESCRIPTIONS = {
     "no timing": ('time_variable = ""\n' + BASE.replace("sample_rate = 1000.0\n", ""),
                   "'time_variable' or 'sample_rate' expected"),
     "planar not a channel": ('planar = ["h", "theta"]\n' + BASE, "planar channel 'theta'"),
+    "control not a channel": ('control = "u"\n' + BASE, "'control' must name one of the "
+                              "channels (h, alpha); found 'u'"),
+    "control in the planar pair": ('control = "alpha"\n' + BASE, "'control' must name a "
+                                   "channel outside the planar pair ['h', 'alpha']"),
     "scale zero": (BASE + "scale = 0\n", "'scale' must be non-zero"),
     "scale text": (BASE + 'scale = "0.18"\n', "'scale' must be a number"),
     "bad regex": ("mu_pattern = 'v(\\d+'\n" + BASE, "'mu_pattern' must be a regular expression"),

@@ -97,6 +97,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rig description (TOML or JSON) of DATA's .mat files: rows, scales, "
                    "time, mu, what a sensor writes without a reading (default: DATA/rig.toml "
                    "if present, else the built-in flutter_cbc rig)")
+    f.add_argument("--no-control", action="store_true",
+                   help="leave out the orbits' response to the CBC controller's residual "
+                   "fundamental (in the model by default where the rig description names a "
+                   "control channel, as the built-in flutter_cbc rig does)")
     _add_fit_options(f)
 
     p = sub.add_parser("predict", help="amplitude and frequency at μ from a saved fit",
@@ -279,11 +283,15 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
 
     progress = not args.quiet
     if progress:
+        control = getattr(rs, "control", None)
+        control = (f"; the control channel '{control}' as a measured input"
+                   if control and not getattr(args, "no_control", False) else "")
         print(f"features: {len(rs)} recordings ({int(rs.is_unstable.sum())} unstable), "
-              "phase-aligned harmonics", file=sys.stderr)
+              f"phase-aligned harmonics{control}", file=sys.stderr)
     t0 = time.perf_counter()
     settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
-    settings = replace(settings, inference=args.inference)
+    settings = replace(settings, inference=args.inference,
+                       control=not getattr(args, "no_control", False))
     if criticality == "auto":
         from bayeshopf.posterior import fit_auto
 
@@ -368,7 +376,9 @@ def _recordings(args):
         print(f"data: {args.dataset} (downloaded once into the user cache unless "
               "$BAYESHOPF_FLUTTER_CBC names a folder)", file=sys.stderr)
     rs = flutter_cbc(download=True)
-    return rs if planar is None else replace(rs, planar=planar)
+    if planar is None:
+        return rs
+    return replace(rs, planar=planar, control=None if rs.control in planar else rs.control)
 
 
 def cmd_fit(args) -> int:

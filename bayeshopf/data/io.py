@@ -628,7 +628,7 @@ def read_cbc_mat(
         key=lambda r: (r.branch == "unstable", r.mu, r.name),
     )
     return RecordingSet(tuple(recs), rig.planar, mu_label=rig.mu_label, mu_units=rig.mu_units,
-                        extra={"rig": rig.name})
+                        extra={"rig": rig.name}, control=rig.control)
 
 
 def dropped_report(rs: RecordingSet) -> list[str]:
@@ -700,4 +700,6 @@ def load_recordings(
         rs = read_cbc_mat(folder, rig)
     if planar is None or tuple(planar) == rs.planar:
         return rs
-    return RecordingSet(rs.recordings, (planar[0], planar[1]), rs.mu_label, rs.mu_units, rs.extra)
+    control = None if rs.control in planar else rs.control
+    return RecordingSet(rs.recordings, (planar[0], planar[1]), rs.mu_label, rs.mu_units, rs.extra,
+                        control)

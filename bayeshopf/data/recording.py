@@ -160,6 +160,11 @@ class RecordingSet:
             channel whose peak-to-peak amplitude the bifurcation diagram shows.
         mu_label: Name of the bifurcation parameter for plots (e.g. "airspeed").
         mu_units: Unit of μ (e.g. "m/s").
+        extra: Free-form provenance (rig name, simulator, seed).
+        control: The channel holding the control-based continuation's control
+            output (the actuator command), or ``None``. Its residual fundamental
+            enters the model as a measured input (:mod:`bayeshopf.model.collapsed`,
+            "Control").
     """
 
     recordings: tuple[Recording, ...]
@@ -167,6 +172,7 @@ class RecordingSet:
     mu_label: str = "mu"
     mu_units: str = ""
     extra: Mapping[str, str] = field(default_factory=dict)
+    control: str | None = None
 
     def __post_init__(self) -> None:
         recs = tuple(self.recordings)
@@ -182,6 +188,14 @@ class RecordingSet:
                         f"{r.name}: planar channel '{c}' expected; "
                         f"found channels {', '.join(r.channels)}"
                     )
+        if self.control is not None:
+            if self.control in pair:
+                raise DataError(f"control channel '{self.control}' expected apart from the "
+                                f"planar pair; found it in {pair!r}")
+            for r in recs:
+                if self.control not in r.channels:
+                    raise DataError(f"{r.name}: control channel '{self.control}' expected; "
+                                    f"found channels {', '.join(r.channels)}")
         object.__setattr__(self, "recordings", recs)
         object.__setattr__(self, "planar", pair)
         object.__setattr__(self, "extra", MappingProxyType(dict(self.extra)))
@@ -224,6 +238,7 @@ class RecordingSet:
             self.mu_label,
             self.mu_units,
             self.extra,
+            self.control,
         )
 
     def without(self, index: int) -> RecordingSet:

@@ -48,8 +48,11 @@ time vector's length and space the samples at ``sample_rate`` from its first
 stamp), ``mu_variable`` (a scalar variable holding μ), ``mu_pattern`` (a
 regular expression searched in the file name when ``mu_variable`` is absent;
 its groups joined by ``.`` give μ, so ``'v(\d+)_(\d+)'`` reads 15.6 from
-``v15_6``), ``mu_label``, ``mu_units`` and ``planar`` (the two channels of the
-planar pair; by default the first two channels).
+``v15_6``), ``mu_label``, ``mu_units``, ``planar`` (the two channels of the
+planar pair; by default the first two channels) and ``control`` (the channel
+that holds the control-based continuation's control output, the actuator
+command; its residual fundamental is a measured input of the model, see
+:mod:`bayeshopf.model.collapsed`; leave it out when the rig records none).
 
 **Channel keys**: ``row``, ``variable`` (default the ``data_variable``; a
 vector variable needs no ``row``), ``unit``, ``scale``, ``offset``, ``angle``,
@@ -258,6 +261,7 @@ class RigDescription:
         mu_label: Name of μ for plots (e.g. ``"airspeed"``).
         mu_units: Unit of μ.
         planar: The planar pair (z1, z2); ``None`` means the first two channels.
+        control: The channel of the control output (actuator command), or ``None``.
         source: Where the description was read from (for messages).
     """
 
@@ -273,6 +277,7 @@ class RigDescription:
     mu_label: str = "mu"
     mu_units: str = ""
     planar: tuple[str, str] | None = None
+    control: str | None = None
     source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -336,6 +341,13 @@ class RigDescription:
             if p not in names:
                 _fail(where, f"planar channel '{p}' expected among the channels; found "
                       f"{', '.join(names)}")
+        if self.control is not None:
+            if not isinstance(self.control, str) or self.control not in names:
+                _fail(where, f"'control' must name one of the channels ({', '.join(names)}); "
+                      f"found {self.control!r}")
+            if self.control in pair:
+                _fail(where, f"'control' must name a channel outside the planar pair "
+                      f"{list(pair)}; found {self.control!r}")
         object.__setattr__(self, "channels", chans)
         object.__setattr__(self, "planar", (pair[0], pair[1]))
 

@@ -22,6 +22,12 @@ error of that mean (the spread over segments divided by √n), and never less
 than the least-squares standard error of the whole record, which is also the
 error of a record too short to cut (a single segment).
 
+**Control** (control-based continuation). When the recordings name a control
+channel (the actuator command, :class:`~bayeshopf.data.RecordingSet`'s
+``control``), its fundamental ``(u_a, u_b)`` is fitted on the same segments at
+the same ω and moved to the same time origin, so it is in phase with the
+orbit's coefficients: the measured input of the model's control term.
+
 **Records with gaps.** A reader leaves out samples at which a sensor had no
 reading (:class:`~bayeshopf.data.rig.ChannelSpec`), so ``t`` may skip whole
 sample intervals. The least-squares fits use the samples that are there, at
@@ -83,11 +89,15 @@ def shift_origin(coeffs: np.ndarray, phase: np.ndarray) -> np.ndarray:
     return np.concatenate([coeffs[..., :1], a * c + b * s, b * c - a * s], axis=-1)
 
 
+def align_phase(coeffs: np.ndarray) -> np.ndarray:
+    """The phase that moves the time origin to the crest of channel 0's fundamental."""
+    K = (coeffs.shape[-1] - 1) // 2
+    return np.arctan2(coeffs[..., 0, K + 1], coeffs[..., 0, 1])
+
+
 def align(coeffs: np.ndarray) -> np.ndarray:
     """Move the time origin to the crest of channel 0's fundamental (``b_{0,1} = 0``)."""
-    K = (coeffs.shape[-1] - 1) // 2
-    phase = np.arctan2(coeffs[..., 0, K + 1], coeffs[..., 0, 1])
-    return shift_origin(coeffs, phase)
+    return shift_origin(coeffs, align_phase(coeffs))
 
 
 def reconstruct(coeffs, phi) -> np.ndarray:
@@ -173,6 +183,9 @@ class HarmonicFeatures:
         frame: The common planar frame.
         n_harmonics: K.
         names: Recording names.
+        control: The control channel's fundamental ``(u_a, u_b)`` on the same
+            time origin (its unit), ``(n_rec, 2)``; ``None`` without a control
+            channel.
     """
 
     mu: np.ndarray
@@ -188,6 +201,7 @@ class HarmonicFeatures:
     frame: PlanarFrame
     n_harmonics: int
     names: tuple[str, ...]
+    control: np.ndarray | None = None
 
     @property
     def n_recordings(self) -> int:
@@ -206,7 +220,8 @@ class HarmonicFeatures:
             "mu", "unstable", "coeffs", "coeffs_se", "segment_rms", "n_segments", "omega",
             "omega_se", "amplitude", "amplitude_sd")}
         return HarmonicFeatures(**arrays, frame=self.frame, n_harmonics=self.n_harmonics,
-                                names=tuple(self.names[i] for i in idx))
+                                names=tuple(self.names[i] for i in idx),
+                                control=None if self.control is None else self.control[idx])
 
     def orbit(self, n_phi: int = 128) -> np.ndarray:
         """Mean orbits in the frame at uniform phases, ``(n_rec, n_phi, 2)``."""
@@ -248,7 +263,7 @@ def extract_harmonics(
     if frame is None:
         frame = PlanarFrame.from_orbits(orbits, rs.planar, rs.units)
     n_c = n_coefficients(n_harmonics)
-    out = {k: [] for k in ("c", "se", "rms", "nseg", "om", "om_se", "amp", "amp_sd")}
+    out = {k: [] for k in ("c", "se", "rms", "nseg", "om", "om_se", "amp", "amp_sd", "u")}
     phi = np.linspace(0, 2 * np.pi, 128, endpoint=False)
     for rec, z in zip(rs, orbits, strict=True):
         w = frame.to_frame(z)
@@ -272,13 +287,22 @@ def extract_harmonics(
         if not slices:
             slices = [slice(0, t.size)]
         n_seg = len(slices)
-        seg, seg_om = [], []
+        u = None if rs.control is None else rec.channel(rs.control)[:, None]
+        seg, seg_u, seg_om = [], [], []
         for sl in slices:
             A = time_design(t[sl], omega, n_harmonics)
-            seg.append(np.linalg.lstsq(A, w[sl], rcond=None)[0].T)
+            y = w[sl] if u is None else np.concatenate([w[sl], u[sl]], axis=1)
+            c = np.linalg.lstsq(A, y, rcond=None)[0].T
+            seg.append(c[:2])
+            seg_u.append(c[2:])
             if n_seg > 1:  # the segment's own frequency, for the frequency's spread
                 seg_om.append(_frequency(t[sl], w[sl], rec.name))
-        seg = align(np.array(seg))
+        seg = np.array(seg)
+        origin = align_phase(seg)
+        seg = shift_origin(seg, origin)
+        if u is not None:
+            cu = shift_origin(np.array(seg_u), origin).mean(axis=0)[0]
+            out["u"].append([cu[1], cu[n_harmonics + 1]])
         mean = seg.mean(axis=0)
         # least-squares standard error of the whole record (white-noise floor)
         A = time_design(t, omega, n_harmonics)
@@ -306,5 +330,5 @@ def extract_harmonics(
         n_segments=np.array(out["nseg"]), omega=np.array(out["om"]),
         omega_se=np.array(out["om_se"]), amplitude=np.array(out["amp"]),
         amplitude_sd=np.array(out["amp_sd"]), frame=frame, n_harmonics=n_harmonics,
-        names=tuple(rs.names),
+        names=tuple(rs.names), control=None if rs.control is None else np.array(out["u"]),
     )

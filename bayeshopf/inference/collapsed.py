@@ -100,6 +100,9 @@ class CollapsedSettings:
         extrapolation: Whether a new measurement's band includes the model error
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
+        control: Whether the model includes the response to the control's
+            residual fundamental, where the recordings name a control channel
+            (:mod:`bayeshopf.model.collapsed`, "Control").
     """
 
     n_harmonics: int = 4
@@ -120,6 +123,7 @@ class CollapsedSettings:
     lbfgs_steps: int = 300
     frequency: bool = True
     extrapolation: bool = True
+    control: bool = True
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
@@ -130,8 +134,13 @@ class CollapsedSettings:
 
 def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
                unfolding: str = "curved", mu_label: str = "mu",
-               mu_units: str = "", frequency: bool = True) -> cm.CollapsedSpec:
+               mu_units: str = "", frequency: bool = True,
+               control: bool = True) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
+
+    The control term is on when ``control`` is true and the features hold a
+    control channel whose fundamental is not zero throughout; its prior sd is
+    ``CONTROL_SCALE · ρ / ū`` (``ū`` the RMS of ``|U_i|``).
 
     Raises:
         FitError: For fewer than two distinct μ, an unknown criticality or
@@ -151,15 +160,22 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
     orbits = features.orbit()
     rms = np.sqrt(np.mean(np.sum((orbits - orbits.mean(axis=1, keepdims=True)) ** 2, -1), -1))
     unstable_mu = mu[features.unstable]
+    scale = float(np.median(rms))
+    control_scale = None
+    if control and features.control is not None:
+        u_rms = float(np.sqrt(np.mean(np.sum(np.asarray(features.control) ** 2, axis=-1))))
+        if u_rms > 0:
+            control_scale = cm.CONTROL_SCALE * scale / u_rms
     return cm.CollapsedSpec(
         criticality=criticality, frame=features.frame, n_harmonics=features.n_harmonics,
         mu_centre=float(0.5 * (mu.max() + mu.min())), mu_span=float(mu.max() - mu.min()),
         mu_min=float(mu.min()),
         mu_unstable_max=float(unstable_mu.max()) if unstable_mu.size else None,
-        orbit_scale=float(np.median(rms)), nn_hidden=cm.hidden_layer(nn_width),
+        orbit_scale=scale, nn_hidden=cm.hidden_layer(nn_width),
         mu_label=mu_label, mu_units=mu_units,
         unfolding=unfolding if criticality == "subcritical" else "linear",
         omega_centre=float(np.mean(features.omega)) if frequency else None,
+        control_scale=control_scale,
     )
 
 
@@ -174,11 +190,20 @@ def model_key(kwargs: dict) -> tuple:
 
 
 def model_arguments(spec: cm.CollapsedSpec, features: HarmonicFeatures) -> dict:
-    """Keyword arguments of :func:`~bayeshopf.model.collapsed.collapsed_model`."""
-    return dict(spec=spec, mu=jnp.asarray(features.mu),
-                sign=jnp.asarray(np.where(features.unstable, -1.0, 1.0)),
-                coeffs=jnp.asarray(features.coeffs), coeffs_se=jnp.asarray(features.coeffs_se),
-                omega=jnp.asarray(features.omega), omega_se=jnp.asarray(features.omega_se))
+    """Keyword arguments of :func:`~bayeshopf.model.collapsed.collapsed_model`.
+
+    ``control`` is there only when the spec has the control term.
+    """
+    kw = dict(spec=spec, mu=jnp.asarray(features.mu),
+              sign=jnp.asarray(np.where(features.unstable, -1.0, 1.0)),
+              coeffs=jnp.asarray(features.coeffs), coeffs_se=jnp.asarray(features.coeffs_se),
+              omega=jnp.asarray(features.omega), omega_se=jnp.asarray(features.omega_se))
+    if spec.control_scale is not None:
+        if features.control is None:
+            raise FitError("the model has the control term but the features hold no control "
+                           "channel; extract them from recordings that name one")
+        kw["control"] = jnp.asarray(features.control)
+    return kw
 
 
 def _initial_values(spec: cm.CollapsedSpec) -> dict:
@@ -729,7 +754,7 @@ def _map_draw(kwargs):
         t, k = a
         k_map, k_freq = jax.random.split(k)
         beta = cm.draw_map(spec, t, kwargs["mu"], kwargs["sign"], kwargs["coeffs"],
-                           kwargs["coeffs_se"], k_map)
+                           kwargs["coeffs_se"], k_map, kwargs.get("control"))
         if spec.omega_centre is None:
             return beta, jnp.zeros(0)
         return beta, cm.draw_frequency(spec, t, kwargs["mu"], kwargs["sign"], kwargs["omega"],
@@ -753,7 +778,8 @@ def _pointwise(kwargs):
     def one(t):
         return cm.pointwise_log_likelihood(kwargs["spec"], t, kwargs["mu"], kwargs["sign"],
                                            kwargs["coeffs"], kwargs["coeffs_se"],
-                                           kwargs["omega"], kwargs["omega_se"])
+                                           kwargs["omega"], kwargs["omega_se"],
+                                           kwargs.get("control"))
 
     return one
 

@@ -69,6 +69,28 @@ the same Woodbury marginal and drawn exactly per draw, and only ``σ_ω`` joins
 the sampled parameters. The record is then the map applied to the circle
 traversed at ``Ω(r_i, μ_i)``: no phase integration is needed.
 
+**Control** (recordings held by control-based continuation, when the rig
+records the controller's output). CBC holds an orbit with a feedback force
+whose search nulls one scalar measure of its fundamental (a one-dimensional
+search over the target amplitude), not the fundamental itself: what is left is
+measured, as the fundamental ``U_i = u_{a,i} − i u_{b,i}`` of the control
+channel on the features' time origin. To first order it moves the orbit's
+shape relative to the first frame axis ``w1`` (the channel ``z1`` scaled,
+whose crest is the time origin and whose size CBC's target sets): the second
+axis's fundamental ``a_{2,1} − i b_{2,1}`` gains ``H U_i`` with a complex
+gain ``H = h_r + i h_i``,
+
+.. math::  Δa_{2,1} = h_r u_a + h_i u_b,\qquad Δb_{2,1} = h_r u_b − h_i u_a,
+
+two more columns of ``Φ_i`` for ``w2`` (:func:`control_columns`; zero for
+``w1``), linear in ``h`` and integrated out with the map:
+``h_r, h_i ~ N(0, (κ ρ / ū)^2)``, ``ū`` the RMS of ``|U_i|`` over the
+recordings and ``κ =`` :data:`CONTROL_SCALE` (broad: a control as large as
+its typical value may move the orbit by its whole size). A response of ``w1``
+as well would move the time origin and the size themselves; on the rig the
+data do not determine it (``docs/validation.md``). Predictions at a new μ, the
+diagram and its branches are the uncontrolled system's (``U = 0``).
+
 **Model error away from the recordings** (predictions only). A new recording at
 μ on branch ``b`` has its orbit about its centre scaled by ``e^{δ_b(μ)}``, with
 ``δ_b`` a squared-exponential Gaussian process in μ conditioned on ``δ_b = 0``
@@ -124,6 +146,8 @@ FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
 EXTRAPOLATION_SCALE = 0.1
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0
+#: Prior sd of the control's complex gain ``H`` in units of ``ρ / ū`` (module docstring).
+CONTROL_SCALE = 1.0
 #: Phases per orbit for the projection P (aliasing-free for K ≤ 8 with degree-3 terms).
 N_PHI = 32
 
@@ -149,6 +173,9 @@ class CollapsedSpec:
             (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior).
         omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
             ``None`` for a model without the frequency.
+        control_scale: Prior sd of the control's gain ``h`` (frame units per
+            unit of the control channel), or ``None`` for a model without the
+            control term (module docstring, "Control").
     """
 
     criticality: str
@@ -164,6 +191,7 @@ class CollapsedSpec:
     mu_units: str = ""
     unfolding: str = "curved"
     omega_centre: float | None = None
+    control_scale: float | None = None
 
     def mu_tilde(self, mu):
         """``μ̃ = (μ − μ_c)/Δμ``."""
@@ -171,7 +199,12 @@ class CollapsedSpec:
 
     @property
     def n_basis(self) -> int:
-        """Number of basis functions J."""
+        """Number of columns J of ``Φ``: the map's basis functions, then the control's two."""
+        return self.n_map + (0 if self.control_scale is None else len(CONTROL_TERMS))
+
+    @property
+    def n_map(self) -> int:
+        """Number of the map's own basis functions (monomials and network)."""
         return len(MONOMIALS) * len(MU_POWERS) + self.nn_hidden[0].shape[1]
 
     def to_dict(self) -> dict:
@@ -205,6 +238,8 @@ MU_POWERS = (0, 1, 2)
 #: Prior scale, relative to ρ, of a monomial's coefficient by degree, before the
 #: factors τ_μ^p (power p of μ̃) and τ_s (degree ≥ 2).
 DEGREE_SCALE = {0: SHIFT_SCALE, 1: LINEAR_SCALE, 2: 1.0, 3: 1.0}
+#: Names of the control's columns: the real and imaginary parts of ``H``.
+CONTROL_TERMS = ("control_re", "control_im")
 
 
 def basis_names(spec: CollapsedSpec) -> list[str]:
@@ -215,7 +250,8 @@ def basis_names(spec: CollapsedSpec) -> list[str]:
             term = " ".join(t for t in (f"u1^{i}" if i else "", f"u2^{j}" if j else "",
                                        f"m^{p}" if p else "") if t)
             names.append(term or "1")
-    return names + [f"nn{h}" for h in range(spec.nn_hidden[0].shape[1])]
+    names += [f"nn{h}" for h in range(spec.nn_hidden[0].shape[1])]
+    return names + (list(CONTROL_TERMS) if spec.control_scale is not None else [])
 
 
 def basis(u, mu_tilde, nn_hidden):
@@ -245,7 +281,11 @@ def prior_sd(spec: CollapsedSpec, tau_mu, tau_shape):
             sds.append(jnp.broadcast_to(s, jnp.shape(tau_mu)))
     H = spec.nn_hidden[0].shape[1]
     nn = jnp.broadcast_to(rho * tau_shape / jnp.sqrt(H), jnp.shape(tau_mu) + (H,))
-    return jnp.concatenate([jnp.stack(sds, axis=-1), nn], axis=-1)
+    parts = [jnp.stack(sds, axis=-1), nn]
+    if spec.control_scale is not None:
+        n = len(CONTROL_TERMS)
+        parts.append(jnp.broadcast_to(spec.control_scale, jnp.shape(tau_mu) + (n,)))
+    return jnp.concatenate(parts, axis=-1)
 
 
 def reference_radius(spec: CollapsedSpec, a2):
@@ -295,7 +335,25 @@ def _monomial_harmonics(n_harmonics: int, n_phi: int) -> np.ndarray:
     return projection(n_harmonics, n_phi) @ mono
 
 
-def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI):
+def control_columns(spec: CollapsedSpec, control):
+    r"""The control's columns of ``Φ`` for ``w2``, ``(n, 2K+1, 2)`` (module docstring).
+
+    Column ``h_r`` holds ``u_a`` at ``a_1`` and ``u_b`` at ``b_1``; column ``h_i``
+    holds ``u_b`` at ``a_1`` and ``−u_a`` at ``b_1``: ``Δ(a_1 − i b_1) = H U``.
+
+    Args:
+        spec: Model structure (its ``n_harmonics``).
+        control: ``(n, 2)``: ``(u_a, u_b)`` of each recording.
+    """
+    u = jnp.asarray(control)
+    K = spec.n_harmonics
+    z = jnp.zeros(u.shape[:1] + (2 * K + 1,))
+    h_r = z.at[:, 1].set(u[:, 0]).at[:, K + 1].set(u[:, 1])
+    h_i = z.at[:, 1].set(u[:, 1]).at[:, K + 1].set(-u[:, 0])
+    return jnp.stack([h_r, h_i], axis=-1)
+
+
+def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, control=None):
     r"""``Φ_i = P Ψ_i`` for every recording, shape ``(n_rec, 2K+1, J)``.
 
     On the circle ``ũ = s_i (\cos φ, \sin φ)`` (``s_i = r_i / r_ref``) a
@@ -303,7 +361,10 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI):
     is ``s_i^{i+j} μ̃_i^p`` times a constant (:func:`_monomial_harmonics`); only
     the network's columns are evaluated at the ``n_phi`` phases. Equal to
     ``P · basis(ũ(φ_n), μ̃_i)`` (``tests/test_collapsed.py``), with a quarter of
-    the work.
+    the work. With the control term (``spec.control_scale``) the last two
+    columns are :func:`control_columns` of ``control`` ``(n_rec, 2)``, those of
+    ``w2`` (:func:`channel_designs` gives ``w1`` zeros there); ``None`` means
+    no control (the uncontrolled system: a new μ, the diagram).
     """
     phi = 2 * np.pi * np.arange(n_phi) / n_phi
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
@@ -317,7 +378,11 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI):
     pre = (s[:, None, None] * (np.cos(phi)[:, None] * W[0] + np.sin(phi)[:, None] * W[1])
            + m[:, None, None] * W[2] + b)                                          # (n, N, H)
     nn = jnp.einsum("kn,inh->ikh", projection(spec.n_harmonics, n_phi), jnp.tanh(pre))
-    return jnp.concatenate([scale[:, None, :] * C, nn], axis=-1)
+    cols = [scale[:, None, :] * C, nn]
+    if spec.control_scale is not None:
+        cols.append(control_columns(spec, jnp.zeros((s.shape[0], 2)) if control is None
+                                    else control))
+    return jnp.concatenate(cols, axis=-1)
 
 
 def frequency_basis(r2, mu_tilde):
@@ -457,7 +522,7 @@ def block_log_predictive(Phi, y, d, sd, n_blocks: int):
 
 
 def pointwise_log_likelihood(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se,
-                             omega=None, omega_se=None):
+                             omega=None, omega_se=None, control=None):
     """``log p(y_i | y_{−i}, θ)`` of each recording: both channels' coefficients and ω.
 
     The channels and the frequency are independent given θ, so each
@@ -472,16 +537,17 @@ def pointwise_log_likelihood(spec: CollapsedSpec, theta: dict, mu, sign, coeffs,
         coeffs_se: Their standard errors.
         omega: Measured angular frequencies, or ``None``.
         omega_se: Their standard errors.
+        control: The control's fundamental ``(n_rec, 2)``, or ``None``.
 
     Returns:
         Shape ``(n_rec,)``.
     """
     n = mu.shape[0]
-    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+    Phis = channel_designs(spec, mu, sign, theta, control)
     sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
     var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
-    total = sum(block_log_predictive(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd, n)
-                for c in range(2))
+    total = sum(block_log_predictive(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1),
+                                     sd, n) for c in range(2))
     if spec.omega_centre is not None and omega is not None:
         total = total + block_log_predictive(
             frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
@@ -541,13 +607,26 @@ def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
     return coeffs_se**2 + sigma[:, None] ** 2 + (sigma_rel * coeffs) ** 2
 
 
+def channel_designs(spec: CollapsedSpec, mu, sign, theta: dict, control=None) -> list:
+    """``Φ`` of each frame axis, flattened to ``(n_rec (2K+1), J)``.
+
+    The same for both axes, except that with the control term ``w1``'s control
+    columns are zero (the response is ``w2``'s; module docstring, "Control").
+    """
+    Phi = design(spec, mu, sign, theta, control=control)
+    flat = Phi.reshape(-1, spec.n_basis)
+    if spec.control_scale is None:
+        return [flat, flat]
+    return [Phi.at[..., spec.n_map:].set(0.0).reshape(-1, spec.n_basis), flat]
+
+
 def coefficient_marginals(spec: CollapsedSpec, theta: dict, tau_mu, tau_shape, sigma,
-                          sigma_rel, mu, sign, coeffs, coeffs_se):
+                          sigma_rel, mu, sign, coeffs, coeffs_se, control=None):
     """``log p(y_c | θ)`` of both channels, the map integrated out, shape ``(2,)``."""
-    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+    Phis = channel_designs(spec, mu, sign, theta, control)
     sd = prior_sd(spec, tau_mu, tau_shape)
     var = error_variance(coeffs, coeffs_se, sigma, sigma_rel)
-    return jnp.stack([log_marginal(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd)
+    return jnp.stack([log_marginal(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd)
                       for c in range(2)])
 
 
@@ -583,7 +662,7 @@ def clear_jits() -> None:
 
 
 def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None,
-                    omega_se=None):
+                    omega_se=None, control=None):
     """NumPyro model of the nonlinear parameters, the map integrated out.
 
     Args:
@@ -595,11 +674,13 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
         omega: Measured angular frequencies (rad/s), ``(n_rec,)``; used when
             ``spec.omega_centre`` is set.
         omega_se: Their standard errors (0 for a one-segment record).
+        control: The control's fundamental ``(n_rec, 2)`` (``spec.control_scale``
+            set), or ``None``.
     """
     theta = normal_form_sites(spec)
     tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
     marginals = spec_jit(spec, coefficient_marginals)(theta, tau_mu, tau_shape, sigma, sigma_rel,
-                                                     mu, sign, coeffs, coeffs_se)
+                                                     mu, sign, coeffs, coeffs_se, control)
     for c in range(2):
         numpyro.factor(f"marginal_{c}", marginals[c])
     if spec.omega_centre is not None and omega is not None:
@@ -609,26 +690,37 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
             theta, sigma_omega, mu, sign, omega, omega_se))
 
 
-def _map_conditional(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, eps):
-    """Draws (from standard-normal ``eps`` (2, J)) and means of ``β | y, θ``, each (J, 2)."""
-    Phi = design(spec, mu, sign, theta).reshape(-1, spec.n_basis)
+def _map_conditional(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, eps,
+                     control=None):
+    """Draws (from standard-normal ``eps`` (2, J)) and means of ``β | y, θ``, each (J, 2).
+
+    With the control term, ``w1``'s control rows are zero (no response there).
+    """
+    Phis = channel_designs(spec, mu, sign, theta, control)
     sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
     var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
-    pairs = [conditional_draw(Phi, coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd, eps[c])
-             for c in range(2)]
-    return (jnp.stack([d for d, _ in pairs], axis=-1), jnp.stack([m for _, m in pairs], axis=-1))
+    pairs = [conditional_draw(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd,
+                              eps[c]) for c in range(2)]
+    draw, mean = (jnp.stack([d for d, _ in pairs], axis=-1),
+                  jnp.stack([m for _, m in pairs], axis=-1))
+    if spec.control_scale is not None:
+        draw, mean = draw.at[spec.n_map:, 0].set(0.0), mean.at[spec.n_map:, 0].set(0.0)
+    return draw, mean
 
 
-def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key):
-    """One exact draw of the map's coefficients ``β`` (J, 2) given one draw ``θ``."""
+def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key, control=None):
+    """One exact draw of the map's coefficients ``β`` (J, 2) given one draw ``θ``.
+
+    With the control term, ``β``'s last two rows are the control's gain ``h`` (zero for ``w1``).
+    """
     eps = jax.random.normal(key, (2, spec.n_basis))
-    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps)[0]
+    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps, control)[0]
 
 
-def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se):
+def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, control=None):
     """``E[β | y, θ]`` (J, 2): the map's coefficients at their conditional mean."""
     eps = jnp.zeros((2, spec.n_basis))
-    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps)[1]
+    return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps, control)[1]
 
 
 def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, key):
@@ -639,12 +731,23 @@ def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, 
                             d, frequency_prior_sd(spec), eps)[0]
 
 
-def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi):
-    """Predicted orbit ``w(φ)`` in the frame at one μ, shape ``phi.shape + (2,)``."""
+def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi, control=None):
+    """Predicted orbit ``w(φ)`` in the frame at one μ, shape ``phi.shape + (2,)``.
+
+    With the control term, ``control`` ``(u_a, u_b)`` adds the response
+    ``h_r (u_a cos φ + u_b sin φ) + h_i (u_b cos φ − u_a sin φ)`` of each axis
+    (``β``'s last two rows, zero for ``w1``); ``None`` is the uncontrolled orbit.
+    """
     r = radius(spec, mu, sign, theta)
     scale = r / reference_radius(spec, theta.get("a2", -1.0))
     u = scale * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
-    return basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta
+    w = basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta[: spec.n_map]
+    if spec.control_scale is None or control is None:
+        return w
+    ua, ub = control[0], control[1]
+    c, s = jnp.cos(phi), jnp.sin(phi)
+    cols = jnp.stack([ua * c + ub * s, ub * c - ua * s], axis=-1)
+    return w + cols @ beta[spec.n_map:]
 
 
 def extrapolation_sd(mu, mu_data, length: float) -> np.ndarray:

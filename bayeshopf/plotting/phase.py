@@ -104,7 +104,11 @@ def phase_panels(
         centre = z.mean(axis=0) if offsets == "remove" else np.zeros(2)
         # broken where samples were left out (sensor dropouts), not joined across
         measured = rec.trace(recordings.planar, max_points) - centre
-        draws = np.asarray(fit.orbits(rec.mu, rec.branch), float)
+        # a training recording's orbit as it was held, with its control's response
+        names = list(getattr(getattr(fit, "features", None), "names", ()))
+        control = (fit.recording_control(names.index(rec.name))
+                   if rec.name in names and hasattr(fit, "recording_control") else None)
+        draws = np.asarray(fit.orbits(rec.mu, rec.branch, control=control), float)
         draws = draws[np.all(np.isfinite(draws), axis=(1, 2))] - centre
         shown, median = np.zeros((0, draws.shape[1] + 1, 2)), None
         if draws.shape[0]:
