@@ -125,6 +125,20 @@ for e in post.orbit_error():
 display(Markdown("\\n".join(rows)))
 ppc = post.ppc()
 print(f"{int(ppc.covered.sum())}/{ppc.covered.size} training amplitudes inside their 90% predictive bands")"""),
+    new_markdown_cell("""**The controller's residual.** CBC holds each orbit with a feedback force. Its search nulls one
+scalar measure of that force's fundamental, not the fundamental itself, and the rig records the
+actuator command (the rig description's `control` channel). Its fundamental `U` is a measured
+input of the model: the pitch axis `w2` of each orbit, relative to the heave, moves by `H U` with a
+complex gain `H` integrated out with the map (`docs/validation.md`, "The CBC controller's
+residual"). The gain, and the size of `H U` against each recording's fundamental of `w2`:"""),
+    new_code_cell("""g = post.control_gain()
+for part in ("re", "im"):
+    iv = g["gain"][part]
+    print(f"H, {part}: {iv['median']:.0f} [{iv['ci90'][0]:.0f}, {iv['ci90'][1]:.0f}] {g['units']}")
+rows = ["| recording | control fundamental (mV) | response / fundamental of w2 |", "|---|---:|---:|"]
+for name, u in zip(post.features.names, post.features.control):
+    rows.append(f"| {name} | {1e3 * np.hypot(*u):.2f} | {100 * g['response'][name]:.1f}% |")
+display(Markdown("\\n".join(rows)))"""),
     new_markdown_cell("""The diagram: posterior median, 50% and 90% bands of both branches, and (dotted) the 90% band
 of a new measurement, which includes the model error away from the recordings."""),
     new_code_cell("""fig = plot_bifurcation(post.diagram(diagram_grid(post)), ppc, mu_label="airspeed",
