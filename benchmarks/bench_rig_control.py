@@ -100,7 +100,8 @@ def main():
     out = {"actuator": part_actuator(rs, f)}
     for r in out["actuator"]:
         print(f"{r['name']:24s} actuator {1e3 * r['actuator_fundamental_V']:.2f} mV at "
-              f"{r['actuator_phase_to_heave_deg']:6.1f} deg; heave {r['heave_fundamental_mm']:.1f} mm")
+              f"{r['actuator_phase_to_heave_deg']:6.1f} deg; "
+              f"heave {r['heave_fundamental_mm']:.1f} mm")
     loos = {}
     for control in (False, True):
         label = "with_control" if control else "without_control"

@@ -102,3 +102,24 @@ def test_map_free_pair_invariant_of_the_rig(post):
     held = pairs[2]
     pred = invariant_line(pairs[:2]).unstable_amplitude(held.mu, held.stable_amplitude)
     assert pred.lo > held.unstable_amplitude, (pred, held.unstable_amplitude)
+
+
+def test_a_saved_fit_keeps_the_control(post, tmp_path):
+    """The fit folder holds each recording's control fundamental, so a reloaded fit has
+    the same held orbits, and summary.json reports the gain."""
+    import json
+
+    import numpy as np
+
+    from bayeshopf.report import load_fit, save_hybrid
+
+    save_hybrid(post, tmp_path / "fit")
+    summary = json.loads((tmp_path / "fit" / "summary.json").read_text())
+    assert summary["control"]["gain"] == post.control_gain()["gain"]
+    assert [r["control_fundamental"] for r in summary["recordings"]] == \
+        np.asarray(post.features.control).tolist()
+    back = load_fit(tmp_path / "fit").posterior
+    assert back.spec.control_scale == post.spec.control_scale
+    np.testing.assert_array_equal(back.features.control, post.features.control)
+    assert [e["relative"] for e in back.orbit_error()] == pytest.approx(
+        [e["relative"] for e in post.orbit_error()], rel=1e-12)
