@@ -412,3 +412,28 @@ def test_predict_on_a_fit_of_the_removed_core_is_a_one_line_error(tmp_path, caps
     assert main(["predict", str(old), "--mu", "16"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "legacy inference core" in err and "model.json" in err
+
+
+@pytest.mark.parametrize("flag", [[], ["--no-control"]])
+def test_no_control_reaches_the_fit(flag, tmp_path, monkeypatch, capsys):
+    """The built-in rig names its actuator as the control channel; ``--no-control``
+    fits without the term."""
+    import bayeshopf.posterior
+    from bayeshopf.errors import FitError
+
+    CBC_DIR = (Path(__file__).parents[1] / ".." / "shared" / "data" / "flutter_cbc").resolve()
+    if not CBC_DIR.is_dir():
+        pytest.skip(f"flutter CBC recordings not found at {CBC_DIR}")
+    seen = {}
+
+    def stop(rs, criticality, **kw):   # the fit itself is tested elsewhere
+        seen.update(rs=rs, **kw)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
+    assert main(["fit", str(CBC_DIR), "--out", str(tmp_path / "o"), *flag]) == 2
+    err = capsys.readouterr().err
+    assert "stopped by the test" in err
+    assert seen["rs"].control == "actuator"
+    assert seen["settings"].control is (not flag)
+    assert ("the control channel 'actuator' as a measured input" in err) is (not flag)
