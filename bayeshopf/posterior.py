@@ -204,7 +204,10 @@ class HybridPosterior:
         of ``H``, the response of the second frame axis ``w2`` (frame units per
         unit of the control channel; :mod:`bayeshopf.model.collapsed`, "Control");
         ``prior_sd``: their prior sd; ``response``: per recording, the median of
-        ``|H U_i|`` relative to the measured fundamental of ``w2``.
+        ``|H U_i|`` relative to the measured fundamental of ``w2``. Where ``U`` is
+        nearly proportional to the orbit, as on the wind-tunnel rig, that part of
+        the response is not told apart from the map's own linear gain, so
+        ``response`` is an upper bound on what the control moves.
         """
         spec = self.spec
         if spec.control_scale is None:
