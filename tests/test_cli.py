@@ -437,3 +437,36 @@ def test_no_control_reaches_the_fit(flag, tmp_path, monkeypatch, capsys):
     assert seen["rs"].control == "actuator"
     assert seen["settings"].control is (not flag)
     assert ("the control channel 'actuator' as a measured input" in err) is (not flag)
+
+
+def test_control_channel_named_on_the_command_line(tmp_path, monkeypatch, capsys):
+    """``--control`` names the control channel of an interchange folder (a CSV column);
+    a channel that is not there is a one-line error; it excludes ``--no-control``."""
+    from dataclasses import replace
+
+    import bayeshopf.posterior
+    from bayeshopf.data.recording import RecordingSet
+    from bayeshopf.errors import FitError
+
+    rs, _ = demo_system(seed=3, fast=True)
+    recs = tuple(replace(r, channels={**r.channels, "u": np.cos(15.0 * r.t)},
+                         units={**r.units, "u": "V"}) for r in rs)
+    folder = write_interchange(RecordingSet(recs, rs.planar, rs.mu_label, rs.mu_units),
+                               tmp_path / "held")
+    seen = {}
+
+    def stop(rs, criticality, **kw):   # the fit itself is tested elsewhere
+        seen.update(rs=rs, **kw)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
+    assert main(["fit", str(folder), "--out", str(tmp_path / "a"), "--control", "u"]) == 2
+    assert "stopped by the test" in capsys.readouterr().err
+    assert seen["rs"].control == "u" and seen["settings"].control is True
+    assert main(["fit", str(folder), "--out", str(tmp_path / "b"), "--control", "v"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("bayeshopf fit: error: --control: ") \
+        and "control channel 'v' expected; found channels" in err, err
+    with pytest.raises(SystemExit):
+        main(["fit", str(folder), "--out", str(tmp_path / "c"), "--control", "u",
+              "--no-control"])

@@ -97,10 +97,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rig description (TOML or JSON) of DATA's .mat files: rows, scales, "
                    "time, mu, what a sensor writes without a reading (default: DATA/rig.toml "
                    "if present, else the built-in flutter_cbc rig)")
-    f.add_argument("--no-control", action="store_true",
-                   help="leave out the orbits' response to the CBC controller's residual "
-                   "fundamental (in the model by default where the rig description names a "
-                   "control channel, as the built-in flutter_cbc rig does)")
+    ctl = f.add_mutually_exclusive_group()
+    ctl.add_argument("--control", metavar="CHANNEL", default=None,
+                     help="the channel holding the CBC controller's output (actuator command): "
+                     "its residual fundamental becomes a measured input of the model (default: "
+                     "the rig description's 'control'; for interchange folders, a column name)")
+    ctl.add_argument("--no-control", action="store_true",
+                     help="leave out the orbits' response to the CBC controller's residual "
+                     "fundamental (in the model by default where the rig description names a "
+                     "control channel, as the built-in flutter_cbc rig does)")
     _add_fit_options(f)
 
     p = sub.add_parser("predict", help="amplitude and frequency at μ from a saved fit",
@@ -349,6 +354,22 @@ def cmd_demo(args) -> int:
 
 
 def _recordings(args):
+    """``fit``'s recordings (DATA or ``--dataset``), with ``--control`` applied."""
+    from dataclasses import replace
+
+    from bayeshopf.errors import DataError
+
+    rs = _read_recordings(args)
+    name = getattr(args, "control", None)
+    if name is None:
+        return rs
+    try:
+        return replace(rs, control=name)
+    except DataError as exc:
+        raise DataError(f"--control: {exc}") from None
+
+
+def _read_recordings(args):
     """``fit``'s recordings: the folder DATA or the published data set ``--dataset``."""
     from bayeshopf.errors import DataError
 
