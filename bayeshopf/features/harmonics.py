@@ -294,7 +294,8 @@ def extract_harmonics(
             y = w[sl] if u is None else np.concatenate([w[sl], u[sl]], axis=1)
             c = np.linalg.lstsq(A, y, rcond=None)[0].T
             seg.append(c[:2])
-            seg_u.append(c[2:])
+            if u is not None:
+                seg_u.append(c[2:])
             if n_seg > 1:  # the segment's own frequency, for the frequency's spread
                 seg_om.append(_frequency(t[sl], w[sl], rec.name))
         seg = np.array(seg)

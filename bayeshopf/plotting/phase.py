@@ -98,17 +98,17 @@ def phase_panels(
 ) -> list[PhasePanel]:
     """The panels of :func:`plot_phase_portraits` (its arguments), one per recording."""
     check_offsets(offsets)
+    # a training recording's orbit as it was held, with its control's response
+    names = list(getattr(getattr(fit, "features", None), "names", ()))
+    held = {n: fit.recording_control(i) for i, n in enumerate(names)
+            if hasattr(fit, "recording_control")}
     out = []
     for rec in recordings:
         z = np.asarray(rec.planar(recordings.planar), float)
         centre = z.mean(axis=0) if offsets == "remove" else np.zeros(2)
         # broken where samples were left out (sensor dropouts), not joined across
         measured = rec.trace(recordings.planar, max_points) - centre
-        # a training recording's orbit as it was held, with its control's response
-        names = list(getattr(getattr(fit, "features", None), "names", ()))
-        control = (fit.recording_control(names.index(rec.name))
-                   if rec.name in names and hasattr(fit, "recording_control") else None)
-        draws = np.asarray(fit.orbits(rec.mu, rec.branch, control=control), float)
+        draws = np.asarray(fit.orbits(rec.mu, rec.branch, control=held.get(rec.name)), float)
         draws = draws[np.all(np.isfinite(draws), axis=(1, 2))] - centre
         shown, median = np.zeros((0, draws.shape[1] + 1, 2)), None
         if draws.shape[0]:
