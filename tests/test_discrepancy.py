@@ -358,12 +358,14 @@ def test_stored_notebook_is_a_full_run_whose_numbers_are_the_readme_s():
     readme = (REPO / "README.md").read_text()
     text = run.text
     # the blind run's hybrid fit, quoted in the README's limits
-    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.146 " \
-           "[13.984, 14.246]" in text
-    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.146 [13.984, 14.246] m/s" in \
+    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.143 " \
+           "[13.995, 14.252]" in text
+    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.143 [13.995, 14.252] m/s" in \
         " ".join(readme.split())
-    # the rig: the hybrid fit's fold as the README gives it, the calibrated fold
-    assert "fold 14.216 [13.737, 14.503]" in text and "14.22 [13.74, 14.50]" in readme
+    # the rig: the hybrid fit's fold (with the control term) as the README gives it, the
+    # calibrated fold
+    assert "fold 14.258 [13.810, 14.523]" in text and "14.26 [13.81, 14.52] m/s with it, as " \
+        "notebook 04's stored run has it" in " ".join(readme.split())
     assert "after      Hopf 17.929 m/s, fold 15.342 m/s" in text
     assert "its fold moves to 15.3 m/s" in " ".join(readme.split())
     assert run.n_images == 3
