@@ -1,6 +1,6 @@
 """How large a model error away from the data the rig's leave-one-out bar needs, and what it costs.
 
-Run: ``python benchmarks/bench_loo_model_error.py [--nested]``. Writes
+Run: ``python benchmarks/bench_loo_model_error.py [--nested | --nested-bayes]``. Writes
 ``benchmarks/loo_model_error.json``.
 
 The predictive band of a new recording includes a model error away from the
@@ -25,6 +25,11 @@ recording (default settings, seed 0, the full data's frame) serves every ``S``.
    ``v_j``) and ``c_j``. The scale is the maximum of the likelihood
    ``Π_j N(r_j; 0, v_j + s² c_j²)`` (empirical Bayes on the training folds), and
    ``i``'s band uses that ``s`` (fixed). 7 × 6 = 42 further fits.
+3. **The same, Bayesian** (``--nested-bayes``, after ``--nested``: it reads the
+   inner residuals from the JSON and refits the 7 outer folds only). Instead of
+   the maximum, ``s`` is drawn from its posterior given the six residuals, with
+   the package's own ``HalfNormal(0.1)`` as the prior (on a grid of 0–1.5), so
+   the band carries the uncertainty of the scale as well.
 """
 
 import json
@@ -82,6 +87,55 @@ def _ml_scale(res):
         return 0.5 * np.sum(np.log(var) + r**2 / var)
 
     return float(minimize_scalar(nll, bounds=(0.0, 3.0), method="bounded").x)
+
+
+def _posterior_scale(inner, prior=0.1):
+    """Grid posterior of ``s``: ``HalfNormal(prior) × Π N(r; 0, v + s²c²)`` over inner residuals."""
+    r, v, c = (np.array(x) for x in zip(*inner, strict=True))
+    grid = np.linspace(0.0, 1.5, 3001)
+    var = v[None] + grid[:, None] ** 2 * c[None] ** 2
+    logp = -0.5 * (grid / prior) ** 2 - 0.5 * np.sum(np.log(var) + r[None] ** 2 / var, axis=1)
+    w = np.exp(logp - logp.max())
+    return grid, w / w.sum()
+
+
+def nested_bayes():
+    """Part 3: the outer folds' bands with ``s`` from its posterior (module docstring)."""
+    from bayeshopf.inference.cache import configure_xla_cpu
+
+    configure_xla_cpu(host_devices=2)
+    from bayeshopf.data import load_recordings
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference.collapsed import CollapsedSettings
+
+    out = json.loads((HERE / "loo_model_error.json").read_text())
+    f = extract_harmonics(load_recordings(HERE.parent.parent / "shared/data/flutter_cbc"))
+    n, rows = f.n_recordings, []
+    for i, fold in enumerate(out["folds"]):
+        assert fold["name"] == f.names[i]
+        grid, w = _posterior_scale([tuple(x) for x in fold["nested"]["inner"]])
+        post = _fit(f, [j for j in range(n) if j != i], CollapsedSettings())
+        branch = "unstable" if f.unstable[i] else "stable"
+        amp, _ = _band(post, f.mu[i], branch, f.coeffs_se[i],
+                       lambda m, rng, g=grid, w=w: rng.choice(g, size=m, p=w))
+        lo, hi = np.quantile(amp, [0.5 - CI / 2, 0.5 + CI / 2])
+        cdf = np.cumsum(w)
+        rows.append({"name": f.names[i], "s_mean": float(np.sum(grid * w)),
+                     "s_90": [float(grid[np.searchsorted(cdf, 0.05)]),
+                              float(grid[np.searchsorted(cdf, 0.95)])],
+                     "band": [float(lo), float(hi)],
+                     "inside": bool(lo <= f.amplitude[i] <= hi)})
+        print(f"{f.names[i]:24s} {1e3 * f.amplitude[i]:6.2f} mm  s = {rows[-1]['s_mean']:.3f} "
+              f"[{rows[-1]['s_90'][0]:.3f}, {rows[-1]['s_90'][1]:.3f}]  band "
+              f"{np.round(1e3 * np.array(rows[-1]['band']), 2).tolist()}  "
+              f"{'inside' if rows[-1]['inside'] else 'outside'}", flush=True)
+    inside = sum(r["inside"] for r in rows)
+    width = float(np.mean([np.diff(r["band"])[0] for r in rows]))
+    out["nested_bayes"] = {"folds": rows, "inside": inside, "mean_width_m": width,
+                           "width_vs_legacy": width / LEGACY_WIDTH}
+    print(f"nested, Bayesian: {inside}/{n}, mean width {1e3 * width:.1f} mm "
+          f"({width / LEGACY_WIDTH:.2f} × legacy)")
+    (HERE / "loo_model_error.json").write_text(json.dumps(out, indent=1))
 
 
 def main(nested=False):
@@ -157,4 +211,7 @@ def main(nested=False):
 
 
 if __name__ == "__main__":
-    main(nested="--nested" in sys.argv[1:])
+    if "--nested-bayes" in sys.argv[1:]:
+        nested_bayes()
+    else:
+        main(nested="--nested" in sys.argv[1:])
