@@ -148,7 +148,9 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
     ``ci`` is the mass of the intervals of μ0, a2, the fold and each
     recording's predicted amplitude (keys ``ci90`` at the default 0.9, ``ci95``
     at 0.95, …; ``ppc`` must be at the same level). The convergence and fit
-    checks in ``diagnostics`` stay at 90%.
+    checks in ``diagnostics`` stay at 90%. An ``extra`` ``leave_one_out``
+    (:meth:`bayeshopf.validation.LeaveOneOut.report`) adds its check to
+    ``diagnostics`` (``leave_one_out``, and its warning when it fails).
     """
     ppc = post.ppc(ci) if ppc is None else ppc
     inside = f"inside_ci{round(100 * ppc.ci)}"
@@ -209,6 +211,13 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
     }
     if extra:
         out.update(extra)
+    loo = out.get("leave_one_out")
+    if loo is not None:   # bayeshopf.validation's held-out check joins the fit's checks
+        chk = loo["check"]
+        out["diagnostics"] = {**diag, "leave_one_out": {k: v for k, v in chk.items()
+                                                        if k != "warning"},
+                              "warnings": [*diag["warnings"],
+                                           *([chk["warning"]] if chk["warning"] else [])]}
     return out
 
 

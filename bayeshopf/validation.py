@@ -62,6 +62,8 @@ METHOD_LABELS = {
 }
 #: Noise draws of a plug-in band.
 N_PLUG_IN_DRAWS = 2000
+#: :meth:`LeaveOneOut.check` flags a coverage this improbable under calibrated bands.
+COVERAGE_ALPHA = 0.05
 
 
 @dataclass(frozen=True)
@@ -144,6 +146,31 @@ class LeaveOneOut:
         too narrow.
         """
         return float(binom.cdf(self.coverage(method), len(self.folds), CI))
+
+    def check(self, method: str = "bayes", alpha: float = COVERAGE_ALPHA) -> dict:
+        """Whether the held-out coverage is plausible for calibrated 90% bands.
+
+        It fails when ``coverage_p < alpha``: so few held-out recordings inside
+        their bands would be that improbable if the bands were calibrated (with
+        7 folds: 4 or fewer inside; 5 of 7 has ``P = 0.15`` and passes).
+
+        Returns:
+            JSON-ready: ``inside_ci90``, ``n_folds``, ``coverage_p``, ``alpha``,
+            ``ok``, and ``warning`` (one line, ``None`` when ``ok``).
+        """
+        k, n, p = self.coverage(method), len(self.folds), self.coverage_p(method)
+        ok = bool(p >= alpha)
+        warning = None if ok else (
+            f"leave-one-out: {k}/{n} held-out amplitudes inside their {100 * CI:g}% predictive "
+            f"bands (P = {p:.2g} if the bands were calibrated): the bands away from the "
+            "recordings are too narrow for these data")
+        return {"method": method, "inside_ci90": k, "n_folds": n, "coverage_p": p,
+                "alpha": alpha, "ok": ok, "warning": warning}
+
+    def report(self, method: str = "bayes") -> dict:
+        """JSON-ready, for ``summary.json``: :meth:`check`, :meth:`summary` and :meth:`table`."""
+        return {"check": self.check(method), "summary": self.summary()[method],
+                "folds": self.table()}
 
     def summary(self) -> dict:
         """Per method: coverage (and :meth:`coverage_p`), held-out errors and the fold's spread."""

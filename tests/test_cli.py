@@ -470,3 +470,53 @@ def test_control_channel_named_on_the_command_line(tmp_path, monkeypatch, capsys
     with pytest.raises(SystemExit):
         main(["fit", str(folder), "--out", str(tmp_path / "c"), "--control", "u",
               "--no-control"])
+
+
+@pytest.mark.parametrize("n_inside", [3, 7])
+def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_data, tmp_path,
+                                                                 monkeypatch, capsys, n_inside):
+    """``fit --leave-one-out``: the refits get the fit's features, criticality, settings and
+    seed; their check joins ``diagnostics`` and warns when the coverage is improbable (the
+    fit itself and the refits are replaced here; both are tested in test_validation)."""
+    from bayeshopf import posterior, report, validation
+
+    post = report.load_fit(fitted).posterior
+    monkeypatch.setattr(posterior, "fit_hybrid", lambda rs, crit, **kw: post)
+    seen = {}
+
+    def refits(features, criticality, **kw):
+        seen.update(features=features, criticality=criticality, **kw)
+        names, folds = features.names, []
+        for i, name in enumerate(names):
+            a = float(features.amplitude[i])
+            lo, hi = (0.9 * a, 1.1 * a) if i < n_inside else (1.2 * a, 1.4 * a)
+            p = validation.HeldOut(median=0.5 * (lo + hi), lo=lo, hi=hi, p_exists=1.0,
+                                   mu_fold=(15.0, 14.9, 15.1), mu0=(18.0, 17.9, 18.1))
+            folds.append(validation.Fold(name=name, mu=float(features.mu[i]), branch="stable",
+                                         measured=a, measured_sd=0.0, predictions={"bayes": p}))
+        return validation.LeaveOneOut(folds=tuple(folds), methods=("bayes",))
+
+    monkeypatch.setattr(validation, "leave_one_out", refits)
+    out = tmp_path / "loo"
+    assert main(["fit", str(good_data), "--out", str(out), "--quiet", "--no-figures",
+                 "--seed", "1", "--leave-one-out"]) == 0
+    assert seen["features"] is post.features and seen["criticality"] == "subcritical"
+    assert seen["seed"] == 1 and seen["methods"] == ("bayes",)
+    assert seen["settings"].inference == "nuts" and seen["settings"].control is True
+    s = json.loads((out / "summary.json").read_text())
+    n = len(s["recordings"])
+    loo = s["leave_one_out"]
+    assert [r["file"] for r in loo["folds"]] == [r["file"] for r in s["recordings"]]
+    assert loo["check"]["inside_ci90"] == n_inside == loo["summary"]["coverage"]
+    from scipy.stats import binom
+
+    flagged = bool(binom.cdf(n_inside, n, 0.9) < 0.05)     # 3/7: P = 0.003; 7/7: 1
+    assert flagged is (n_inside == 3)
+    chk = s["diagnostics"]["leave_one_out"]
+    assert chk["ok"] is (not flagged) and "warning" not in chk
+    lines = [w for w in s["diagnostics"]["warnings"] if w.startswith("leave-one-out:")]
+    assert len(lines) == int(flagged)
+    printed = capsys.readouterr().out.split("leave-one-out (each recording")[1]
+    assert printed.count("  OUTSIDE") == n - n_inside
+    assert f"{n_inside}/{n} held-out amplitudes inside their bands" in printed
+    assert (f"warning: leave-one-out: {n_inside}/{n} held-out" in printed) is flagged

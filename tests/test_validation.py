@@ -154,3 +154,25 @@ def test_plot_leave_one_out(one_fold):
     ax = fig.axes[0]
     gids = {ln.get_gid() for ln in ax.lines}
     assert {"stable-median", "unstable-median", "map-stable", "map-unstable"} <= gids
+
+
+@pytest.mark.parametrize("k, flagged", [(7, False), (5, False), (4, True), (3, True)])
+def test_check_flags_a_coverage_improbable_for_calibrated_bands(k, flagged):
+    """``check`` fails below P = 0.05: with 7 folds at 4 of 7 (P = 0.026), not at 5 (0.150)."""
+    import json
+
+    from bayeshopf.validation import COVERAGE_ALPHA
+
+    loo = _study(k)
+    c = loo.check("bayes")
+    assert c["ok"] is (not flagged) and c["alpha"] == COVERAGE_ALPHA == 0.05
+    assert (c["inside_ci90"], c["n_folds"]) == (k, 7)
+    assert c["coverage_p"] == pytest.approx(_binomial_cdf(k, 7, 0.9), rel=1e-12)
+    if flagged:
+        assert c["warning"].startswith(f"leave-one-out: {k}/7 held-out amplitudes inside")
+        assert f"P = {_binomial_cdf(k, 7, 0.9):.2g}" in c["warning"]
+    else:
+        assert c["warning"] is None
+    rep = json.loads(json.dumps(loo.report("bayes")))
+    assert rep["check"] == c and rep["summary"]["coverage"] == k
+    assert [r["bayes"]["inside"] for r in rep["folds"]] == [True] * k + [False] * (7 - k)

@@ -91,6 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --criticality auto: refit each model without every recording "
                    "whose PSIS Pareto k exceeds 0.7 and use its exact leave-one-out density "
                    "(one fit per refit)")
+    f.add_argument("--leave-one-out", action="store_true",
+                   help="also refit without each recording in turn and predict it (one fit "
+                   "per recording): summary.json's leave_one_out and a warning when too few "
+                   "held-out amplitudes lie inside their 90%% predictive bands")
     f.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
                    help="channels of the planar pair (default: the first two)")
     f.add_argument("--rig", metavar="FILE", default=None,
@@ -215,7 +219,27 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
         print(f"{ppc['frequencies_inside_ci90']}/{ppc['n_recordings']} measured frequencies "
               f"inside their 90% predictive intervals (Ω(r, μ); bands span {lo:.4g}–{hi:.4g} Hz).")
     _print_nuts_check(summary)
+    _print_leave_one_out(summary)
     _print_diagnostics(summary)
+
+
+def _print_leave_one_out(summary: dict) -> None:
+    """The held-out table of ``fit --leave-one-out``, when the summary has one."""
+    loo = summary.get("leave_one_out")
+    if loo is None:
+        return
+    au = summary["amplitude_units"]
+    print(f"\nleave-one-out (each recording predicted by a fit without it; 90% predictive "
+          f"bands):\n{'held out':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
+          f"{'predicted (90%)':>30s}  [{au}]")
+    for r in loo["folds"]:
+        p = r["bayes"]
+        flag = "" if p["inside"] else "  OUTSIDE"
+        print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {r['measured']:10.4g} "
+              f"{p['median']:10.4g} [{p['ci90'][0]:8.4g}, {p['ci90'][1]:8.4g}]{flag}")
+    c, s = loo["check"], loo["summary"]
+    print(f"{c['inside_ci90']}/{c['n_folds']} held-out amplitudes inside their bands (P = "
+          f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}")
 
 
 def _print_diagnostics(summary: dict) -> None:
@@ -310,6 +334,15 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
 
         extra = {**(extra or {}), "nuts_check": compare_with_nuts(post, seed=args.seed,
                                                                   progress=progress)}
+    if getattr(args, "leave_one_out", False):
+        from bayeshopf import validation
+
+        if progress:
+            print(f"leave-one-out: {post.features.n_recordings} refits, each without one "
+                  "recording, which it then predicts", file=sys.stderr)
+        loo = validation.leave_one_out(post.features, post.criticality, methods=("bayes",),
+                                       seed=args.seed, settings=settings, progress=progress)
+        extra = {**(extra or {}), "leave_one_out": loo.report()}
     if progress:
         print(f"checks and files: posterior predictive check, "
               f"{'' if args.no_figures else 'figures, '}writing {out}", file=sys.stderr)
