@@ -472,9 +472,10 @@ def test_control_channel_named_on_the_command_line(tmp_path, monkeypatch, capsys
               "--no-control"])
 
 
-@pytest.mark.parametrize("n_inside", [3, 7])
+@pytest.mark.parametrize("n_inside, figures", [(3, True), (7, False)])
 def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_data, tmp_path,
-                                                                 monkeypatch, capsys, n_inside):
+                                                                 monkeypatch, capsys, n_inside,
+                                                                 figures):
     """``fit --leave-one-out``: the refits get the fit's features, criticality, settings and
     seed; their check joins ``diagnostics`` and warns when the coverage is improbable (the
     fit itself and the refits are replaced here; both are tested in test_validation)."""
@@ -493,13 +494,16 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
             p = validation.HeldOut(median=0.5 * (lo + hi), lo=lo, hi=hi, p_exists=1.0,
                                    mu_fold=(15.0, 14.9, 15.1), mu0=(18.0, 17.9, 18.1))
             folds.append(validation.Fold(name=name, mu=float(features.mu[i]), branch="stable",
-                                         measured=a, measured_sd=0.0, predictions={"bayes": p}))
+                                         measured=a, measured_sd=0.0, predictions={"bayes": p},
+                                         fit=post if kw["keep_fits"] else None))
         return validation.LeaveOneOut(folds=tuple(folds), methods=("bayes",))
 
     monkeypatch.setattr(validation, "leave_one_out", refits)
     out = tmp_path / "loo"
-    assert main(["fit", str(good_data), "--out", str(out), "--quiet", "--no-figures",
-                 "--seed", "1", "--leave-one-out"]) == 0
+    assert main(["fit", str(good_data), "--out", str(out), "--quiet", "--seed", "1",
+                 "--leave-one-out", *([] if figures else ["--no-figures"])]) == 0
+    assert seen["keep_fits"] is figures      # the folds' fits only for the figure
+    assert (out / "figures" / "leave_one_out.png").is_file() is figures
     assert seen["features"] is post.features and seen["criticality"] == "subcritical"
     assert seen["seed"] == 1 and seen["methods"] == ("bayes",)
     assert seen["settings"].inference == "nuts" and seen["settings"].control is True

@@ -554,3 +554,37 @@ def test_the_map_is_finished_by_a_root_find_where_lbfgs_stops_at_the_values_roun
     assert float(value_and_grad(x)[0]) == pytest.approx(-mp.log_joint, abs=1e-9)
     _, ok = ci.laplace_covariance(value_and_grad, x)
     assert ok
+
+
+
+def test_svi_particles_one_after_another_give_the_vmapped_elbo():
+    """The SVI's ELBO maps its particles (stop 45: vmapped, two batches of triangular solves
+    at once hung XLA's CPU thread pool); the steps are those of NumPyro's vmapped particles."""
+    import jax
+    import numpy as np
+    import numpyro
+    import numpyro.distributions as dist
+    import optax
+    from numpyro.infer import SVI, Trace_ELBO
+    from numpyro.infer.autoguide import AutoMultivariateNormal
+
+    from bayeshopf.inference.collapsed import SVI_PARTICLES
+
+    def model(y):
+        m = numpyro.sample("m", dist.Normal(0.0, 10.0))
+        s = numpyro.sample("s", dist.HalfNormal(2.0))
+        numpyro.sample("y", dist.Normal(m, s), obs=y)
+
+    y = np.random.default_rng(0).normal(1.5, 0.7, 40)
+    runs = {}
+    for vectorize in (True, False):
+        svi = SVI(model, AutoMultivariateNormal(model), optax.adam(5e-3),
+                  Trace_ELBO(num_particles=SVI_PARTICLES, vectorize_particles=vectorize))
+        runs[vectorize] = svi.run(jax.random.PRNGKey(3), 200, y, progress_bar=False,
+                                  stable_update=True)
+    ref, got = runs[True], runs[False]
+    np.testing.assert_allclose(np.asarray(got.losses), np.asarray(ref.losses), rtol=1e-9)
+    assert float(ref.losses[-20:].mean()) < float(ref.losses[:20].mean()) - 1.0   # it learnt
+    for k, v in ref.params.items():
+        np.testing.assert_allclose(np.asarray(got.params[k]), np.asarray(v), rtol=1e-9,
+                                   atol=1e-12)

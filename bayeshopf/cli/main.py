@@ -334,6 +334,7 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
 
         extra = {**(extra or {}), "nuts_check": compare_with_nuts(post, seed=args.seed,
                                                                   progress=progress)}
+    loo = None
     if getattr(args, "leave_one_out", False):
         from bayeshopf import validation
 
@@ -341,7 +342,8 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
             print(f"leave-one-out: {post.features.n_recordings} refits, each without one "
                   "recording, which it then predicts", file=sys.stderr)
         loo = validation.leave_one_out(post.features, post.criticality, methods=("bayes",),
-                                       seed=args.seed, settings=settings, progress=progress)
+                                       seed=args.seed, settings=settings,
+                                       keep_fits=not args.no_figures, progress=progress)
         extra = {**(extra or {}), "leave_one_out": loo.report()}
     if progress:
         print(f"checks and files: posterior predictive check, "
@@ -352,8 +354,17 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
         from bayeshopf.plotting import start_figures
 
         def figures(folder):   # returns while the figure process finishes
-            return start_figures(post, rs, folder, truth=truth, zoom=truth is not None,
-                                 ci=args.ci, executor=worker)
+            pending = start_figures(post, rs, folder, truth=truth, zoom=truth is not None,
+                                    ci=args.ci, executor=worker)
+            if loo is not None:    # meanwhile, here: the folds' fits are in this process
+                from bayeshopf.plotting._io import save_figure
+                from bayeshopf.plotting.validation import plot_leave_one_out
+
+                save_figure(plot_leave_one_out(loo, post.features, mu_label=post.mu_label,
+                                               mu_units=post.mu_units,
+                                               amplitude_units=post.amplitude_units),
+                            folder / "leave_one_out.png")
+            return pending
 
     report.save_hybrid(post, out, force=args.force, figures=figures, ppc=ppc,
                        extra_summary=extra, ci=args.ci)

@@ -705,11 +705,19 @@ def _nuts(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progres
     return chains, int(np.sum(np.concatenate(diverging, axis=1))), sampler
 
 
+#: Particles of the ELBO's estimate per SVI step.
+SVI_PARTICLES = 4
+
+
 def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress: bool):
     latent = {k: jnp.asarray(map_point.params[k]) for k in map_point.unconstrained}
     guide = AutoMultivariateNormal(cm.collapsed_model, init_loc_fn=init_to_value(values=latent),
                                    init_scale=0.01)
-    svi = SVI(cm.collapsed_model, guide, optax.adam(5e-3), Trace_ELBO(num_particles=4))
+    # the particles one after another (lax.map), not vmapped: a batch of triangular solves
+    # (the guide's and the collapsed likelihood's) runs on XLA's intra-op thread pool, and two
+    # such batches at once hung a run in eight when each waited for the pool ("Stop 45")
+    svi = SVI(cm.collapsed_model, guide, optax.adam(5e-3),
+              Trace_ELBO(num_particles=SVI_PARTICLES, vectorize_particles=False))
     k_run, k_draw = jax.random.split(key)
     res = svi.run(k_run, settings.svi_steps, progress_bar=progress, stable_update=True, **kwargs)
     draws = guide.sample_posterior(k_draw, res.params, sample_shape=(settings.n_svi_draws,))
