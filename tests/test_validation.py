@@ -154,6 +154,17 @@ def test_plot_leave_one_out(one_fold):
     ax = fig.axes[0]
     gids = {ln.get_gid() for ln in ax.lines}
     assert {"stable-median", "unstable-median", "map-stable", "map-unstable"} <= gids
+    assert "MAP plug-in" in [t.get_text() for t in fig.legends[0].get_texts()]
+    # the Bayesian folds only (as `fit --leave-one-out` keeps them): no MAP curve, no key
+    from dataclasses import replace
+
+    (f,) = loo.folds
+    bayes = LeaveOneOut(folds=(replace(f, predictions={"bayes": f.predictions["bayes"]}),),
+                        methods=("bayes",))
+    fig = plot_leave_one_out(bayes, extract_harmonics(rs), mu_units="m/s", n_cols=2)
+    gids = {ln.get_gid() for ln in fig.axes[0].lines}
+    assert "stable-median" in gids and not {"map-stable", "map-unstable"} & gids
+    assert "MAP plug-in" not in [t.get_text() for t in fig.legends[0].get_texts()]
 
 
 @pytest.mark.parametrize("k, flagged", [(7, False), (5, False), (4, True), (3, True)])

@@ -127,7 +127,8 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         Patch(color=BRANCH_COLOURS["stable"], alpha=0.35, label="Bayesian stable (50/90%)"),
         Patch(color=BRANCH_COLOURS["unstable"], alpha=0.35, label="Bayesian unstable (50/90%)"),
         Line2D([], [], color="k", ls=":", lw=0.8, label="90% band of a new recording"),
-        Line2D([], [], color=POINT_COLOUR, ls=POINT_STYLE, label="MAP plug-in"),
+        *([Line2D([], [], color=POINT_COLOUR, ls=POINT_STYLE, label="MAP plug-in")]
+          if "map" in loo.methods else []),      # drawn only where the folds have it
         Line2D([], [], ls="none", marker="*", ms=11, mfc="gold", mec="k",
                label="held out (filled: inside 90%)"),
     ]
