@@ -146,6 +146,8 @@ def test_plug_in_map_is_the_conditional_mean_and_fits_the_training_orbits(one_fo
 
 
 def test_plot_leave_one_out(one_fold):
+    import numpy as np
+
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.plotting.validation import plot_leave_one_out
 
@@ -165,6 +167,18 @@ def test_plot_leave_one_out(one_fold):
     gids = {ln.get_gid() for ln in fig.axes[0].lines}
     assert "stable-median" in gids and not {"map-stable", "map-unstable"} & gids
     assert "MAP plug-in" not in [t.get_text() for t in fig.legends[0].get_texts()]
+    # in mm, as `fit --leave-one-out` draws the rig: every amplitude × 1000, the label [mm]
+    m = plot_leave_one_out(bayes, extract_harmonics(rs), mu_units="m/s", n_cols=2)
+    mm = plot_leave_one_out(bayes, extract_harmonics(rs), mu_units="m/s", n_cols=2,
+                            length_unit="mm")
+    a_m, a_mm = m.axes[0], mm.axes[0]
+    assert "[mm]" in a_mm.get_ylabel() and "[m]" in a_m.get_ylabel()
+    assert a_mm.get_ylim()[1] == pytest.approx(1e3 * a_m.get_ylim()[1])
+    star = [ln for ln in a_mm.lines if ln.get_marker() == "*"][0]
+    assert star.get_ydata()[0] == pytest.approx(1e3 * f.measured)
+    med = {ln.get_gid(): ln.get_ydata() for ln in a_m.lines}["stable-median"]
+    med_mm = {ln.get_gid(): ln.get_ydata() for ln in a_mm.lines}["stable-median"]
+    np.testing.assert_allclose(np.asarray(med_mm, float), 1e3 * np.asarray(med, float))
 
 
 @pytest.mark.parametrize("k, flagged", [(7, False), (5, False), (4, True), (3, True)])

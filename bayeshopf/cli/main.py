@@ -203,10 +203,7 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
           f"{'predicted (' + pct + ')':>30s}  [{au}]")
     for r in summary["recordings"]:
-        p = r["predicted"]
-        flag = "" if r[f"inside_{key}"] else "  OUTSIDE"
-        print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {r['amplitude']:10.4g} "
-              f"{p['median']:10.4g} [{p[key][0]:8.4g}, {p[key][1]:8.4g}]{flag}")
+        _print_row(r, r["amplitude"], r["predicted"], key, r[f"inside_{key}"])
     ppc = summary["ppc"]
     print(f"\n{ppc[f'amplitudes_inside_{key}']}/{ppc['n_recordings']} measured amplitudes "
           f"inside their {pct} predictive intervals; "
@@ -223,6 +220,13 @@ def _print_table(summary: dict, truth: dict | None = None) -> None:
     _print_diagnostics(summary)
 
 
+def _print_row(r: dict, measured: float, predicted: dict, key: str, inside: bool) -> None:
+    """One recording's line of a table: measured amplitude against its predicted band."""
+    lo, hi = predicted[key]
+    print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {measured:10.4g} "
+          f"{predicted['median']:10.4g} [{lo:8.4g}, {hi:8.4g}]{'' if inside else '  OUTSIDE'}")
+
+
 def _print_leave_one_out(summary: dict) -> None:
     """The held-out table of ``fit --leave-one-out``, when the summary has one."""
     loo = summary.get("leave_one_out")
@@ -233,10 +237,7 @@ def _print_leave_one_out(summary: dict) -> None:
           f"bands):\n{'held out':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
           f"{'predicted (90%)':>30s}  [{au}]")
     for r in loo["folds"]:
-        p = r["bayes"]
-        flag = "" if p["inside"] else "  OUTSIDE"
-        print(f"{r['file'][:28]:28s} {r['mu']:8.4g} {r['branch']:>9s} {r['measured']:10.4g} "
-              f"{p['median']:10.4g} [{p['ci90'][0]:8.4g}, {p['ci90'][1]:8.4g}]{flag}")
+        _print_row(r, r["measured"], r["bayes"], "ci90", r["bayes"]["inside"])
     c, s = loo["check"], loo["summary"]
     print(f"{c['inside_ci90']}/{c['n_folds']} held-out amplitudes inside their bands (P = "
           f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}")
@@ -358,11 +359,15 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
                                     ci=args.ci, executor=worker)
             if loo is not None:    # meanwhile, here: the folds' fits are in this process
                 from bayeshopf.plotting._io import save_figure
+                from bayeshopf.plotting._units import readable_length
                 from bayeshopf.plotting.validation import plot_leave_one_out
 
+                unit = readable_length(post.amplitude_units,    # as start_figures's "auto"
+                                       float(abs(post.features.amplitude).max()))
                 save_figure(plot_leave_one_out(loo, post.features, mu_label=post.mu_label,
                                                mu_units=post.mu_units,
-                                               amplitude_units=post.amplitude_units),
+                                               amplitude_units=post.amplitude_units,
+                                               length_unit=unit),
                             folder / "leave_one_out.png")
             return pending
 

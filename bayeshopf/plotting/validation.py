@@ -20,7 +20,8 @@ from bayeshopf.plotting._style import (
     panels,
     style_axes,
 )
-from bayeshopf.plotting.diagram import _draw_band
+from bayeshopf.plotting._units import convert
+from bayeshopf.plotting.diagram import _draw_band, scale_diagram
 from bayeshopf.validation import plug_in_amplitude
 
 #: Colour and line style of the MAP plug-in curve.
@@ -30,7 +31,7 @@ POINT_STYLE = ":"
 
 def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed",
                        mu_units: str = "m/s", amplitude_units: str = "m",
-                       n_cols: int = 4, ax=None) -> Figure:
+                       n_cols: int = 4, ax=None, length_unit: str | None = None) -> Figure:
     """One panel per held-out recording, and a last panel with the fold per fold.
 
     Each panel shows the Bayesian fit without that recording (median, 50% and
@@ -51,6 +52,8 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         ax: Axes to draw into, one per fold and one for the folds' fold points
             (a sequence or array; extra ones hidden; the legend then goes on the
             first); a new figure when ``None``.
+        length_unit: Draw the amplitudes in this length unit (``"mm"``, …) when
+            ``amplitude_units`` is a length (as :func:`~bayeshopf.plotting.plot_diagram`).
 
     Returns:
         The figure.
@@ -75,27 +78,29 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
     own = ax is None
     fig, axes = panels(ax, n_panels, make)
     names = list(features.names)
-    y_max = 1.25 * float(np.nanmax(features.amplitude))
+    factor, amplitude_units = convert(amplitude_units, length_unit)
+    amplitude = factor * np.asarray(features.amplitude, float)
+    y_max = 1.25 * float(np.nanmax(amplitude))
     for ax, fold in zip(axes, loo.folds, strict=False):
         style_axes(ax)
         post = fold.fit
         branches = ("stable", "unstable") if post.criticality == "subcritical" else ("stable",)
         if "bayes" in loo.methods:
-            diag = post.diagram(mu_grid)
+            diag = scale_diagram(post.diagram(mu_grid), factor)
             for branch, band in (("stable", diag.stable), ("unstable", diag.unstable)):
                 if band is not None:
                     _draw_band(ax, branch, band, 0.5)
         if "map" in loo.methods:
             for branch in branches:
-                ax.plot(mu_grid, plug_in_amplitude(post, mu_grid, branch), color=POINT_COLOUR,
-                        ls=POINT_STYLE, lw=1.1, gid=f"map-{branch}")
+                ax.plot(mu_grid, factor * plug_in_amplitude(post, mu_grid, branch),
+                        color=POINT_COLOUR, ls=POINT_STYLE, lw=1.1, gid=f"map-{branch}")
         keep = np.array([n != fold.name for n in names])
         for branch, mask in (("stable", ~features.unstable), ("unstable", features.unstable)):
             sel = keep & mask
-            ax.plot(mu_all[sel], features.amplitude[sel], ls="none", marker=BRANCH_MARKERS[branch],
+            ax.plot(mu_all[sel], amplitude[sel], ls="none", marker=BRANCH_MARKERS[branch],
                     ms=4.5, mfc=marker_face(branch), mec=BRANCH_COLOURS[branch], mew=1.0, zorder=5)
         inside = fold.inside("bayes") if "bayes" in fold.predictions else False
-        ax.plot([fold.mu], [fold.measured], ls="none", marker="*", ms=13, mec="k", mew=1.0,
+        ax.plot([fold.mu], [factor * fold.measured], ls="none", marker="*", ms=13, mec="k", mew=1.0,
                 mfc="gold" if inside else "white", zorder=6)
         ax.set_title(f"without {fold.mu:g} {mu_units} ({fold.branch})", fontsize=LABEL_SIZE - 1)
         ax.set_xlim(mu_grid[0], mu_grid[-1])
@@ -117,6 +122,7 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
     ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=TICK_SIZE - 2,
                   rotation=45)
     ax.set_xlim(-0.5, len(loo.folds) - 0.2)
+    ax.margins(y=0.1)            # an interval's end on the axis would lose its cap
     ax.set_xlabel("held-out recording (s: stable, u: unstable)", fontsize=LABEL_SIZE - 2)
     ax.set_ylabel(axis_label("fold μ_SN", mu_units), fontsize=LABEL_SIZE - 1)
     ax.set_title("fold per fold", fontsize=LABEL_SIZE - 1)
