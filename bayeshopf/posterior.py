@@ -194,8 +194,9 @@ class HybridPosterior:
             return coeffs
         f = self.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
-        return scale_orbits(coeffs, extrapolation_factor(mu, mu_data, self.spec.mu_span,
-                                                         np.shape(coeffs)[0], self.seed))
+        return scale_orbits(coeffs, extrapolation_factor(
+            mu, mu_data, self.spec.mu_span, np.shape(coeffs)[0], self.seed,
+            scale=self.settings.extrapolation_scale))
 
     def control_gain(self, ci: float = CI) -> dict | None:
         """The orbits' response to the control's fundamental, or ``None`` without the term.
@@ -667,10 +668,11 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     return om / (2 * np.pi)
 
 
-def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int) -> np.ndarray:
+def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
+                         scale: float = cm.EXTRAPOLATION_SCALE) -> np.ndarray:
     """Draws of ``e^{δ_b(μ)}``, the model error away from the recordings, ``(n, n_mu)``.
 
-    ``δ_b(μ) = s_e z c_b(μ)`` with ``s_e ~ HalfNormal(EXTRAPOLATION_SCALE)`` and
+    ``δ_b(μ) = s_e z c_b(μ)`` with ``s_e ~ HalfNormal(scale)`` and
     ``z ~ N(0, 1)``, one pair per draw for every μ (smooth bands over μ, exact
     marginals at each μ), and ``c_b`` :func:`~bayeshopf.model.collapsed.extrapolation_sd`
     with ``ℓ = EXTRAPOLATION_LENGTH · Δμ`` (:mod:`bayeshopf.model.collapsed`).
@@ -681,9 +683,10 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int) -> np.n
         mu_span: The recordings' μ span Δμ.
         n: Draws.
         seed: Seed (its own stream, apart from the measurement noise's).
+        scale: Half-normal scale of ``s_e`` (``CollapsedSettings.extrapolation_scale``).
     """
     rng = np.random.default_rng([seed, 1])
-    s = np.abs(rng.normal(0.0, cm.EXTRAPOLATION_SCALE, n))
+    s = np.abs(rng.normal(0.0, scale, n))
     z = rng.standard_normal(n)
     c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
     return np.exp((s * z)[:, None] * c[None])

@@ -43,7 +43,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import DataError, OutputError
-from bayeshopf.model.collapsed import CollapsedSpec
+from bayeshopf.model.collapsed import EXTRAPOLATION_SCALE, CollapsedSpec
 
 SUMMARY = "summary.json"
 POSTERIOR = "posterior.nc"
@@ -280,7 +280,8 @@ def _extrapolation_data(post) -> dict | None:
     if not post.settings.extrapolation:
         return None
     f = post.features
-    return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist()}
+    return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist(),
+            "scale": float(post.settings.extrapolation_scale)}
 
 
 @dataclass(frozen=True)
@@ -301,8 +302,9 @@ class SavedHybrid:
         predictive_se: Standard errors of a new recording's coefficients.
         predictive_omega_se: Standard error of a new recording's frequency (rad/s).
         extrapolation: Training μ of each branch (``mu_stable``, ``mu_unstable``)
-            for the model error away from the recordings; ``None`` when the fit
-            had it off.
+            and the prior scale (``scale``; the default where a fit saved before
+            it had none) of the model error away from the recordings; ``None``
+            when the fit had it off.
         model: The content of ``model.json``.
     """
 
@@ -376,7 +378,8 @@ class SavedHybrid:
             if self.extrapolation is not None:
                 c = bp.scale_orbits(c, bp.extrapolation_factor(
                     [mu], self.extrapolation[f"mu_{branch}"], self.spec.mu_span, c.shape[0],
-                    int(self.summary.get("seed", 0))))
+                    int(self.summary.get("seed", 0)),
+                    scale=self.extrapolation.get("scale", EXTRAPOLATION_SCALE)))
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
             sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
             c = c + sd * rng.standard_normal(c.shape)

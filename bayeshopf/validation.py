@@ -27,14 +27,27 @@ folds the coverage is a coarse measure, so the summary also gives the binomial
 probability of so few held-out recordings inside if the bands were calibrated:
 ``P(X ≤ k)``, ``X ~ Binomial(n, 0.9)`` (the folds share data, so this treats
 them as more independent than they are).
+
+How much too narrow: each fold's log residual ``r_i = log A_i − median log Â_i``
+against its band *without* the model error away from the recordings, that
+band's log variance ``v_i``, and the unit process's sd ``c_i`` at ``μ_i``
+(:func:`~bayeshopf.model.collapsed.extrapolation_sd`) give the scale ``s`` of
+that error that the held-out recordings themselves would choose,
+
+.. math::  \hat s = \arg\max_s \prod_i N(r_i;\ 0,\ v_i + s^2 c_i^2),
+
+reported beside the prior's scale ``S``
+(``CollapsedSettings.extrapolation_scale``). It is read off the recordings
+being validated, so it describes the misfit; set ``S`` from other rigs.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import jax.numpy as jnp
 import numpy as np
+from scipy.optimize import minimize_scalar
 from scipy.stats import binom
 from tqdm.auto import tqdm
 
@@ -78,6 +91,10 @@ class HeldOut:
         mu_fold: ``(median, lo, hi)`` of the fold (``lo = hi = median`` for a plug-in;
             ``nan`` for a supercritical fit).
         mu0: ``(median, lo, hi)`` of the Hopf point.
+        base_log_median: Median of the log amplitude in the band without the model
+            error away from the recordings (``nan`` for a plug-in).
+        base_log_var: Variance of that log amplitude (``nan`` for a plug-in).
+        away_sd: The unit process's sd ``c`` at μ (module docstring; ``nan`` for a plug-in).
     """
 
     median: float
@@ -86,6 +103,9 @@ class HeldOut:
     p_exists: float
     mu_fold: tuple[float, float, float]
     mu0: tuple[float, float, float]
+    base_log_median: float = np.nan
+    base_log_var: float = np.nan
+    away_sd: float = np.nan
 
 
 @dataclass(frozen=True)
@@ -120,6 +140,10 @@ class Fold:
         """``|Â − A| / A`` of ``method``'s median prediction."""
         return float(abs(self.predictions[method].median - self.measured) / self.measured)
 
+    def log_residual(self, method: str = "bayes") -> float:
+        """``log A − median log Â`` against the band without the model error away from the data."""
+        return float(np.log(self.measured) - self.predictions[method].base_log_median)
+
 
 @dataclass(frozen=True)
 class LeaveOneOut:
@@ -128,10 +152,13 @@ class LeaveOneOut:
     Attributes:
         folds: One :class:`Fold` per held-out recording.
         methods: Methods compared.
+        extrapolation_scale: The fits' prior scale ``S`` of the model error away
+            from the recordings (0 when the fits had it off).
     """
 
     folds: tuple[Fold, ...]
     methods: tuple[str, ...]
+    extrapolation_scale: float = cm.EXTRAPOLATION_SCALE
 
     def coverage(self, method: str) -> int:
         """Number of folds whose held-out amplitude lies in the 90% band."""
@@ -147,6 +174,27 @@ class LeaveOneOut:
         """
         return float(binom.cdf(self.coverage(method), len(self.folds), CI))
 
+    def held_out_scale(self, method: str = "bayes") -> float:
+        """The scale ``ŝ`` of the model error away from the data that the held-out residuals choose.
+
+        The maximum of ``Π N(r_i; 0, v_i + s² c_i²)`` over ``0 ≤ s ≤ 3`` (module
+        docstring), over the folds whose band exists; ``nan`` when none has one.
+        It is read off the held-out recordings: a description of the misfit, not
+        a setting validated on them.
+        """
+        rows = [(f.log_residual(method), f.predictions[method].base_log_var,
+                 f.predictions[method].away_sd) for f in self.folds]
+        rows = np.array([r for r in rows if np.all(np.isfinite(r))]).reshape(-1, 3)
+        if not rows.size:
+            return np.nan
+        r, v, c = rows.T
+
+        def nll(s):
+            var = v + s**2 * c**2
+            return 0.5 * np.sum(np.log(var) + r**2 / var)
+
+        return float(minimize_scalar(nll, bounds=(0.0, 3.0), method="bounded").x)
+
     def check(self, method: str = "bayes", alpha: float = COVERAGE_ALPHA) -> dict:
         """Whether the held-out coverage is plausible for calibrated 90% bands.
 
@@ -156,16 +204,22 @@ class LeaveOneOut:
 
         Returns:
             JSON-ready: ``inside_ci90``, ``n_folds``, ``coverage_p``, ``alpha``,
-            ``ok``, and ``warning`` (one line, ``None`` when ``ok``).
+            ``ok``, ``prior_scale`` (``S``), ``held_out_scale``
+            (:meth:`held_out_scale`), and ``warning`` (one line, ``None`` when ``ok``).
         """
         k, n, p = self.coverage(method), len(self.folds), self.coverage_p(method)
+        s_hat = self.held_out_scale(method) if method == "bayes" else np.nan
         ok = bool(p >= alpha)
         warning = None if ok else (
             f"leave-one-out: {k}/{n} held-out amplitudes inside their {100 * CI:g}% predictive "
             f"bands (P = {p:.2g} if the bands were calibrated): the bands away from the "
-            "recordings are too narrow for these data")
+            "recordings are too narrow for these data"
+            + ("" if not np.isfinite(s_hat) else
+               f" (the held-out residuals choose a model-error scale of {s_hat:.2g} away from "
+               f"the recordings; the prior's is {self.extrapolation_scale:g})"))
         return {"method": method, "inside_ci90": k, "n_folds": n, "coverage_p": p,
-                "alpha": alpha, "ok": ok, "warning": warning}
+                "alpha": alpha, "ok": ok, "prior_scale": self.extrapolation_scale,
+                "held_out_scale": s_hat, "warning": warning}
 
     def report(self, method: str = "bayes") -> dict:
         """JSON-ready, for ``summary.json``: :meth:`check`, :meth:`summary` and :meth:`table`."""
@@ -245,6 +299,8 @@ class LeaveOneOut:
                 p = f.predictions[m]
                 row[m] = {"median": p.median, "ci90": [p.lo, p.hi], "inside": f.inside(m),
                           "relative_error": f.relative_error(m), "p_exists": p.p_exists,
+                          "log_residual": f.log_residual(m),
+                          "base_log_sd": float(np.sqrt(p.base_log_var)), "away_sd": p.away_sd,
                           "mu_fold": {"median": p.mu_fold[0], "ci90": list(p.mu_fold[1:])},
                           "mu0": {"median": p.mu0[0], "ci90": list(p.mu0[1:])}}
             rows.append(row)
@@ -335,9 +391,18 @@ def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
                          control=control)[:, 0]
     ok = np.isfinite(amp)
     iv = interval(amp[ok]) if ok.any() else None
+    base = replace(post, settings=replace(post.settings, extrapolation=False)).amplitude(
+        [mu], branch, predictive=True, coeffs_se=coeffs_se, control=control)[:, 0]
+    log_base = np.log(base[np.isfinite(base) & (base > 0)])
+    f = post.features
+    c = cm.extrapolation_sd([mu], f.mu[f.unstable == (branch == "unstable")],
+                            cm.EXTRAPOLATION_LENGTH * post.spec.mu_span)[0]
     return HeldOut(median=iv.median if iv else np.nan, lo=iv.lo if iv else np.nan,
                    hi=iv.hi if iv else np.nan, p_exists=float(ok.mean()),
-                   mu_fold=_triple(post, "mu_fold"), mu0=_triple(post, "mu0"))
+                   mu_fold=_triple(post, "mu_fold"), mu0=_triple(post, "mu0"),
+                   base_log_median=float(np.median(log_base)) if log_base.size else np.nan,
+                   base_log_var=float(np.var(log_base)) if log_base.size else np.nan,
+                   away_sd=float(c))
 
 
 def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
@@ -438,4 +503,6 @@ def leave_one_out(
         out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
                         measured_sd=float(features.amplitude_sd[i]), predictions=preds,
                         fit=post if keep_fits else None))
-    return LeaveOneOut(folds=tuple(out), methods=methods)
+    return LeaveOneOut(folds=tuple(out), methods=methods,
+                       extrapolation_scale=settings.extrapolation_scale
+                       if settings.extrapolation else 0.0)

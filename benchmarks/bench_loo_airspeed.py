@@ -36,7 +36,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-
 from _common import atomic_write, rig_recordings
 
 HERE = Path(__file__).parent

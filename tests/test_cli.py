@@ -524,3 +524,33 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
     assert printed.count("  OUTSIDE") == n - n_inside
     assert f"{n_inside}/{n} held-out amplitudes inside their bands" in printed
     assert (f"warning: leave-one-out: {n_inside}/{n} held-out" in printed) is flagged
+
+
+def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
+    """``--extrapolation-scale`` sets the prior scale of the model error away from the
+    recordings; a value that is not positive is a one-line error before any fit."""
+    import bayeshopf.posterior
+    from bayeshopf.errors import FitError
+
+    seen = {}
+
+    def stop(rs, criticality, **kw):   # the fit itself is tested elsewhere
+        seen.update(kw)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
+    assert main(["demo", "--fast", "--out", str(tmp_path / "a"), "--no-figures",
+                 "--extrapolation-scale", "0.25"]) == 2
+    assert "stopped by the test" in capsys.readouterr().err
+    assert seen["settings"].extrapolation_scale == 0.25
+    seen.clear()
+    assert main(["demo", "--fast", "--out", str(tmp_path / "b"), "--no-figures"]) == 2
+    capsys.readouterr()
+    assert seen["settings"].extrapolation_scale == 0.1
+    for bad in ("0", "-1", "nan"):
+        seen.clear()
+        assert main(["demo", "--fast", "--out", str(tmp_path / "c"), "--no-figures",
+                     "--extrapolation-scale", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--extrapolation-scale" in err, err
+        assert "a positive number expected" in err and not seen

@@ -121,6 +121,42 @@ def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_
     report.save_hybrid(post, tmp_path / "fit")
     saved = report.load_fit(tmp_path / "fit").predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([saved.lo, saved.median, saved.hi], on_b, rtol=1e-9)
+    # a larger prior scale (CollapsedSettings.extrapolation_scale) widens the band away
+    # from the data only, and a saved fit keeps it
+    wide = replace(post, settings=replace(post.settings, extrapolation_scale=0.3))
+    np.testing.assert_allclose(np.quantile(wide.amplitude([f.mu[i]], "stable",
+                                                          predictive=True)[:, 0], q), at,
+                               rtol=1e-4)
+    wide_b = np.quantile(wide.amplitude(beyond, "stable", predictive=True)[:, 0], q)
+    assert wide_b[2] - wide_b[0] > 2 * (on_b[2] - on_b[0]), (wide_b, on_b)
+    report.save_hybrid(wide, tmp_path / "wide")
+    saved = report.load_fit(tmp_path / "wide").predict(beyond[0], "stable", predictive=True)
+    np.testing.assert_allclose([saved.lo, saved.median, saved.hi], wide_b, rtol=1e-9)
+
+
+@pytest.mark.parametrize("scale", [0.1, 0.3])
+def test_model_error_away_from_the_data_has_the_prior_scale(scale):
+    """``log e^{δ} = s z c`` with ``s ~ HalfNormal(S)``, ``z ~ N(0, 1)``: its sd is ``S c``
+    (``E[s²] = S²``), and it is nil at a training μ."""
+    import bayeshopf.model.collapsed as cm
+    from bayeshopf.posterior import extrapolation_factor
+
+    mu_data, span = np.array([15.0, 15.5, 16.0]), 1.0
+    mu = np.array([15.5, 16.3, 17.0])
+    f = extrapolation_factor(mu, mu_data, span, 40000, seed=3, scale=scale)
+    c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * span)
+    np.testing.assert_allclose(f[:, 0], 1.0, atol=1e-4)     # c = 1e-5 there (the kernel's jitter)
+    assert c[1] > 0.3 and c[2] > 0.9
+    np.testing.assert_allclose(np.std(np.log(f[:, 1:]), axis=0), scale * c[1:], rtol=0.04)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, float("nan"), float("inf"), True])
+def test_extrapolation_scale_must_be_positive(bad):
+    from bayeshopf.errors import FitError
+    from bayeshopf.inference.collapsed import CollapsedSettings
+
+    with pytest.raises(FitError, match=r"extrapolation_scale: a positive number expected"):
+        CollapsedSettings(extrapolation_scale=bad)
 
 
 def test_fit_auto_compares_both_normal_forms_by_exact_conditional_loo(planted):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from math import comb
+from math import comb, log
 
 import pytest
 
@@ -11,7 +11,9 @@ from bayeshopf.validation import Fold, HeldOut, LeaveOneOut
 
 def _fold(measured: float, lo: float, hi: float, fold_mu: float) -> Fold:
     p = HeldOut(median=0.5 * (lo + hi), lo=lo, hi=hi, p_exists=1.0,
-                mu_fold=(fold_mu, fold_mu - 0.1, fold_mu + 0.1), mu0=(17.0, 16.9, 17.1))
+                mu_fold=(fold_mu, fold_mu - 0.1, fold_mu + 0.1), mu0=(17.0, 16.9, 17.1),
+                base_log_median=log(0.5 * (lo + hi)),
+                base_log_var=((log(hi) - log(lo)) / 3.29) ** 2, away_sd=0.5)
     return Fold(name="r", mu=15.0, branch="stable", measured=measured, measured_sd=0.0,
                 predictions={"bayes": p})
 
@@ -108,6 +110,10 @@ def test_leave_one_out_refits_without_the_held_out_recording_and_predicts_it(one
     assert abs(plug.median - bayes.median) < 0.03 * bayes.median
     assert plug.mu_fold[1] == plug.mu_fold[0] == plug.mu_fold[2]
     assert abs(plug.mu_fold[0] - truth.mu_fold) < 0.3, plug.mu_fold
+    # the band without the model error away from the data: an interior μ has c > 0, and
+    # the residual is small against that band
+    assert 0 < bayes.away_sd < 1 and 0 < bayes.base_log_var < 0.01
+    assert abs(fold.log_residual("bayes")) < 3 * np.sqrt(bayes.base_log_var) + 0.05
     rows = json.loads(json.dumps(loo.table()))
     assert rows[0]["file"] == name and {"bayes", "map"} <= set(rows[0])
     assert all(np.isfinite(rows[0][m]["median"]) for m in loo.methods)
@@ -196,8 +202,51 @@ def test_check_flags_a_coverage_improbable_for_calibrated_bands(k, flagged):
     if flagged:
         assert c["warning"].startswith(f"leave-one-out: {k}/7 held-out amplitudes inside")
         assert f"P = {_binomial_cdf(k, 7, 0.9):.2g}" in c["warning"]
+        # how much too narrow: the misses (log residual log 2 at c = 0.5) choose a scale
+        # far above the prior's
+        assert c["held_out_scale"] > 0.5 and c["prior_scale"] == 0.1
+        assert f"scale of {c['held_out_scale']:.2g} away from the recordings; the prior's " \
+               "is 0.1" in c["warning"]
     else:
         assert c["warning"] is None
     rep = json.loads(json.dumps(loo.report("bayes")))
     assert rep["check"] == c and rep["summary"]["coverage"] == k
     assert [r["bayes"]["inside"] for r in rep["folds"]] == [True] * k + [False] * (7 - k)
+
+
+@pytest.mark.parametrize("s0", [0.0, 0.25])
+def test_held_out_scale_recovers_a_planted_scale(s0):
+    """``held_out_scale`` maximises ``Π N(r; 0, v + s²c²)``: it recovers the scale the
+    residuals were drawn with, and agrees with a brute-force grid of scipy's normal density."""
+    import numpy as np
+    from scipy.stats import norm
+
+    rng = np.random.default_rng(11)
+    n = 400
+    v = rng.uniform(0.001, 0.01, n)
+    c = rng.uniform(0.2, 1.0, n)
+    r = rng.normal(0.0, np.sqrt(v + s0**2 * c**2))
+    folds = []
+    for ri, vi, ci in zip(r, v, c, strict=True):
+        p = HeldOut(median=1.0, lo=0.9, hi=1.1, p_exists=1.0, mu_fold=(14.0,) * 3,
+                    mu0=(17.0,) * 3, base_log_median=0.0, base_log_var=vi, away_sd=ci)
+        folds.append(Fold(name="r", mu=15.0, branch="stable", measured=float(np.exp(ri)),
+                          measured_sd=0.0, predictions={"bayes": p}))
+    s_hat = LeaveOneOut(folds=tuple(folds), methods=("bayes",)).held_out_scale()
+    grid = np.linspace(0.0, 1.0, 10001)
+    ll = [norm.logpdf(r, 0.0, np.sqrt(v + g**2 * c**2)).sum() for g in grid]
+    assert s_hat == pytest.approx(grid[int(np.argmax(ll))], abs=2e-4)
+    assert abs(s_hat - s0) < 0.03, s_hat
+
+
+def test_held_out_scale_skips_folds_without_a_band():
+    import numpy as np
+
+    loo = _study(5)
+    none = HeldOut(median=np.nan, lo=np.nan, hi=np.nan, p_exists=0.0, mu_fold=(14.0,) * 3,
+                   mu0=(17.0,) * 3)
+    gone = Fold(name="x", mu=15.0, branch="unstable", measured=1.0, measured_sd=0.0,
+                predictions={"bayes": none})
+    assert LeaveOneOut(folds=loo.folds + (gone,), methods=("bayes",)).held_out_scale() == \
+        pytest.approx(loo.held_out_scale(), rel=1e-9)
+    assert np.isnan(LeaveOneOut(folds=(gone,), methods=("bayes",)).held_out_scale())

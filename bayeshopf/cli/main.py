@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import math
 import sys
 import textwrap
 import time
@@ -49,6 +50,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    "figures' outer band (default 0.9; the convergence checks stay at 90%%)")
     p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
+    p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
+                   help="half-normal scale of the model error away from the recordings, in "
+                   "log orbit size (default 0.1): it widens new measurements' bands between "
+                   "and beyond the recordings only; set it from other rigs' leave-one-out")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -241,6 +246,9 @@ def _print_leave_one_out(summary: dict) -> None:
     c, s = loo["check"], loo["summary"]
     print(f"{c['inside_ci90']}/{c['n_folds']} held-out amplitudes inside their bands (P = "
           f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}")
+    if c.get("held_out_scale") is not None:
+        print(f"model error away from the recordings: prior scale {c['prior_scale']:g}; the "
+              f"held-out residuals' own {c['held_out_scale']:.2g} (read off these recordings)")
 
 
 def _print_diagnostics(summary: dict) -> None:
@@ -289,6 +297,10 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     if not 0 < args.ci < 1:
         raise FitError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected "
                        "(e.g. 0.9)")
+    scale = getattr(args, "extrapolation_scale", None)
+    if scale is not None and not (math.isfinite(scale) and scale > 0):
+        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (the "
+                       "default is 0.1)")
     report.check_output_folder(out, args.force)
     worker = None
     if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process
@@ -322,6 +334,8 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
     settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
     settings = replace(settings, inference=args.inference,
                        control=not getattr(args, "no_control", False))
+    if getattr(args, "extrapolation_scale", None) is not None:
+        settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
     if criticality == "auto":
         from bayeshopf.posterior import fit_auto
 

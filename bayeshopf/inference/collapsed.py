@@ -100,6 +100,11 @@ class CollapsedSettings:
         extrapolation: Whether a new measurement's band includes the model error
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
+        extrapolation_scale: Half-normal scale ``S`` of that error's amplitude,
+            ``s_e ~ HalfNormal(S)``, in log orbit size (default
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`). It changes the
+            bands of new measurements only; set it from other rigs' leave-one-out,
+            not from the recordings being validated.
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").
@@ -124,6 +129,15 @@ class CollapsedSettings:
     frequency: bool = True
     extrapolation: bool = True
     control: bool = True
+    extrapolation_scale: float = cm.EXTRAPOLATION_SCALE
+
+    def __post_init__(self):
+        s = self.extrapolation_scale
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) \
+                or s <= 0:
+            raise FitError("extrapolation_scale: a positive number expected (the half-normal "
+                           "scale of the model error away from the recordings, in log orbit "
+                           f"size; default {cm.EXTRAPOLATION_SCALE}); got {s!r}")
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
