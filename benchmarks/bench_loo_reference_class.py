@@ -1,8 +1,10 @@
 """The model error away from the data, calibrated on a class of simulated rigs instead of the rig.
 
-Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig]``. Writes
+Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig] [--effects]``. Writes
 ``benchmarks/loo_reference_class.json`` (after every system, so a long run can be read as it goes);
-``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits).
+``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits);
+``--effects`` runs the class with missing physics instead (below), into
+``benchmarks/loo_reference_class_effects.json``.
 
 The predictive band of a new recording includes a model error away from the
 recordings, ``δ = s z c(μ)`` with ``s ~ HalfNormal(S)`` and ``S = 0.1``
@@ -35,6 +37,20 @@ grid whose pooled coverage reaches 90%. The class is simulated and lacks the
 physics a real rig adds, so it can show that the a priori ``S = 0.1`` is too
 small for rigs of this kind, not that it is too large: the package's ``S``
 becomes ``max(0.1, S_class)``.
+
+**The class with missing physics** (``--effects``, stop 46; fixed before it was
+run). Stop 45's class gave ``S_class`` = 0.05, but its aerofoils have only the
+physics the simulator writes. Here each draw also gets one effect the simulator
+does not have, drawn as issue 21's blind reliability study draws its classes (c)
+and (d) (``bench_discrepancy_reliability.py``, whose sizes were fixed for that
+study): the effect uniformly among the library terms of ``TERM_SIZES`` and the
+independent effects of ``IE_SIZES`` (written without the term library), its
+size log-uniform over its range (a barely detectable size to one that changes
+the LCOs by 2–11%). Seeds 500, 501, …; the base parameters as above from the
+seed, the effect from ``[seed, 2]``; the same acceptance rule, design, noise and
+procedure. Draws whose diagram fails (no Hopf point, not exactly one fold, a lost
+orbit: freeplay and friction break the continuation) are skipped and listed.
+The rule: the package's ``S`` becomes ``max(0.1, S_class, S_effects)``.
 """
 
 import json
@@ -50,6 +66,8 @@ from bench_loo_model_error import SCALES, _band, _ml_scale, _residual  # noqa: E
 
 HERE = Path(__file__).parent
 OUT = HERE / "loo_reference_class.json"
+OUT_EFFECTS = HERE / "loo_reference_class_effects.json"
+FIRST_SEED_EFFECTS = 500
 CI = 0.9
 STABLE_AT = (0.24, 0.51, 0.85, 1.15)
 UNSTABLE_AT = (0.24, 0.54, 0.85)
@@ -58,8 +76,33 @@ NOISE, DURATION_S, RATE_HZ = 0.015, 20.0, 500.0
 FIRST_SEED = 300
 
 
-def draw_system(seed):
-    """The aerofoil with its uncertain parameters drawn from their priors, and its diagram."""
+def draw_effect(seed):
+    """One effect the simulator lacks and its size (module docstring, ``--effects``)."""
+    from bench_discrepancy_reliability import IE_SIZES, TERM_SIZES, _log_uniform
+
+    rng = np.random.default_rng([seed, 2])
+    sizes = {**TERM_SIZES, **IE_SIZES}
+    names = sorted(sizes)
+    name = names[int(rng.integers(len(names)))]
+    return name, _log_uniform(rng, *sizes[name]), ("independent" if name in IE_SIZES
+                                                   else "library")
+
+
+def with_drawn_effect(system, name, size, kind):
+    """``system`` with the effect planted (library terms through the package, the
+    independent ones through ``independent_effects.py``)."""
+    if kind == "library":
+        from bayeshopf.discrepancy.effects import with_effect
+
+        return with_effect(system, name, size)
+    import independent_effects as ie
+
+    return ie.EFFECTS[name][0](system, size)
+
+
+def draw_system(seed, effects=False):
+    """The aerofoil with its uncertain parameters drawn from their priors (and, with
+    ``effects``, one effect it lacks), and its diagram."""
     from bayeshopf.simulators import bifurcation_diagram, get_system
 
     nominal = get_system("flutter3dof")
@@ -67,6 +110,13 @@ def draw_system(seed):
     values = {u.name: float(u.value(rng.standard_normal(), nominal.params[u.name]))
               for u in nominal.uncertain}
     system = nominal.with_params(**values)
+    if effects:
+        name, size, kind = draw_effect(seed)
+        values = {**values, "effect": name, "effect_size": size, "effect_kind": kind}
+        try:
+            system = with_drawn_effect(system, name, size, kind)
+        except Exception as e:                   # an effect this draw cannot take
+            return system, None, values, f"{name}: {type(e).__name__}: {e}"
     try:
         diagram = bifurcation_diagram(system)
     except Exception as e:                       # no Hopf point in the continuation range
@@ -80,7 +130,7 @@ def draw_system(seed):
     return system, diagram, values, ""
 
 
-def main(n_systems=12):
+def main(n_systems=12, effects=False):
     from bayeshopf.inference.cache import configure_xla_cpu
 
     configure_xla_cpu(host_devices=2)    # before any JAX work, as the CLI does on 2 cores
@@ -91,11 +141,11 @@ def main(n_systems=12):
 
     settings = CollapsedSettings()
     systems, skipped, t0 = [], [], time.perf_counter()
-    seed = FIRST_SEED
+    seed, out_file = (FIRST_SEED_EFFECTS, OUT_EFFECTS) if effects else (FIRST_SEED, OUT)
     while len(systems) < n_systems:
-        system, diagram, values, why = draw_system(seed)
+        system, diagram, values, why = draw_system(seed, effects)
         if diagram is None:
-            skipped.append({"seed": seed, "why": why})
+            skipped.append({"seed": seed, "why": why, "effect": values.get("effect")})
             print(f"seed {seed}: skipped ({why})", flush=True)
             seed += 1
             continue
@@ -150,7 +200,7 @@ def main(n_systems=12):
                "design": {"stable_at": STABLE_AT, "unstable_at": UNSTABLE_AT, "noise": NOISE,
                           "duration_s": DURATION_S, "sample_rate_hz": RATE_HZ},
                "wall_s": time.perf_counter() - t0}
-        atomic_write(OUT, json.dumps(out, indent=1))
+        atomic_write(out_file, json.dumps(out, indent=1))
         print(f"{len(systems)} systems, {len(rows)} held out: " + ", ".join(
             f"S={S} {v['inside']}/{v['n']}" for S, v in pooled.items())
             + f"; ML s = {out['ml_scale']:.3f}; S_class = {s_class}", flush=True)
@@ -190,4 +240,5 @@ if __name__ == "__main__":
     if "--rig" in args:
         rig()
     else:
-        main(int(args[args.index("--systems") + 1]) if "--systems" in args else 12)
+        main(int(args[args.index("--systems") + 1]) if "--systems" in args else 12,
+             effects="--effects" in args)
