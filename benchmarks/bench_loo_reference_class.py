@@ -4,7 +4,9 @@ Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig] [--e
 ``benchmarks/loo_reference_class.json`` (after every system, so a long run can be read as it goes);
 ``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits);
 ``--effects`` runs the class with missing physics instead (below), into
-``benchmarks/loo_reference_class_effects.json``.
+``benchmarks/loo_reference_class_effects.json``; ``--resume`` goes on after the last
+seed the file holds. A held-out recording whose refit has no orbit of its branch
+at its μ (no band) counts as outside at every ``S`` and has no residual.
 
 The predictive band of a new recording includes a model error away from the
 recordings, ``δ = s z c(μ)`` with ``s ~ HalfNormal(S)`` and ``S = 0.1``
@@ -130,7 +132,7 @@ def draw_system(seed, effects=False):
     return system, diagram, values, ""
 
 
-def main(n_systems=12, effects=False):
+def main(n_systems=12, effects=False, resume=False):
     from bayeshopf.inference.cache import configure_xla_cpu
 
     configure_xla_cpu(host_devices=2)    # before any JAX work, as the CLI does on 2 cores
@@ -142,6 +144,11 @@ def main(n_systems=12, effects=False):
     settings = CollapsedSettings()
     systems, skipped, t0 = [], [], time.perf_counter()
     seed, out_file = (FIRST_SEED_EFFECTS, OUT_EFFECTS) if effects else (FIRST_SEED, OUT)
+    if resume and out_file.exists():      # go on after the last seed the file holds
+        done = json.loads(out_file.read_text())
+        systems, skipped = done["systems"], done["skipped"]
+        seed = 1 + max(s["seed"] for s in systems + skipped)
+        t0 -= done["wall_s"]
     while len(systems) < n_systems:
         system, diagram, values, why = draw_system(seed, effects)
         if diagram is None:
@@ -176,6 +183,9 @@ def main(n_systems=12, effects=False):
             for S in SCALES:
                 amp, _ = _band(post, f.mu[i], branch, f.coeffs_se[i],
                                lambda m, rng, S=S: np.abs(rng.normal(0.0, S, m)))
+                if amp.size == 0:     # the refit has no such orbit at μ: no band, not inside
+                    row["inside"][str(S)], row["width"][str(S)] = False, None
+                    continue
                 lo, hi = np.quantile(amp, [0.5 - CI / 2, 0.5 + CI / 2])
                 row["inside"][str(S)] = bool(lo <= f.amplitude[i] <= hi)
                 row["width"][str(S)] = float((hi - lo) / f.amplitude[i])
@@ -188,13 +198,15 @@ def main(n_systems=12, effects=False):
         rows = [r for s in systems for r in s["folds"]]
         pooled = {str(S): {"inside": int(sum(r["inside"][str(S)] for r in rows)),
                            "n": len(rows),
-                           "mean_relative_width": float(np.mean([r["width"][str(S)]
-                                                                 for r in rows]))}
+                           "mean_relative_width": float(np.mean(
+                               [r["width"][str(S)] for r in rows
+                                if r["width"][str(S)] is not None]))}
                   for S in SCALES}
         reached = [S for S in SCALES if pooled[str(S)]["inside"] >= CI * len(rows)]
         s_class = reached[0] if reached else None
         out = {"systems": systems, "skipped": skipped, "pooled": pooled,
-               "ml_scale": _ml_scale([(r["r"], r["v"], r["c"]) for r in rows]),
+               "ml_scale": _ml_scale([(r["r"], r["v"], r["c"]) for r in rows
+                                      if np.isfinite(r["r"])]),
                "S_class": s_class,
                "S_package": max(0.1, s_class) if s_class is not None else None,
                "design": {"stable_at": STABLE_AT, "unstable_at": UNSTABLE_AT, "noise": NOISE,
@@ -241,4 +253,4 @@ if __name__ == "__main__":
         rig()
     else:
         main(int(args[args.index("--systems") + 1]) if "--systems" in args else 12,
-             effects="--effects" in args)
+             effects="--effects" in args, resume="--resume" in args)
