@@ -865,7 +865,9 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
     if rel > SIGMA_REL_MAX:
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
                         f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
-                        "fraction, and the predictive bands are that wide for that reason")
+                        "fraction, and the predictive bands are that wide for that reason; "
+                        "bands of new measurements away from the recordings are not "
+                        "calibrated for such a fit (check them with fit --leave-one-out)")
     d["warnings"] = warnings
     return d
 

@@ -5,7 +5,9 @@ Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig] [--e
 ``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits);
 ``--effects`` runs the class with missing physics instead (below), into
 ``benchmarks/loo_reference_class_effects.json``; ``--resume`` goes on after the last
-seed the file holds. A held-out recording whose refit has no orbit of its branch
+seed the file holds; ``--in-sample [--effects]`` adds each kept system's fit of all
+seven recordings and its own checks (:func:`in_sample`, a probe written after the
+results). A held-out recording whose refit has no orbit of its branch
 at its μ (no band) counts as outside at every ``S`` and has no residual.
 
 The predictive band of a new recording includes a model error away from the
@@ -218,6 +220,48 @@ def main(n_systems=12, effects=False, resume=False):
             + f"; ML s = {out['ml_scale']:.3f}; S_class = {s_class}", flush=True)
 
 
+def in_sample(effects=True):
+    """Each kept system's fit of all seven recordings and its own checks (``--in-sample``).
+
+    Adds ``in_sample`` to every system of the JSON: the median relative model
+    error ``σ_rel`` (the package warns above 2%), the largest orbit error and
+    whether the package's fit checks raised a warning, beside that system's
+    held-out misfit, to see whether the fits whose extrapolation fails say so
+    in-sample. Written after the class's held-out results were seen: a probe,
+    not a rule.
+    """
+    from bayeshopf.inference.cache import configure_xla_cpu
+
+    configure_xla_cpu(host_devices=2)
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference.collapsed import CollapsedSettings
+    from bayeshopf.posterior import fit_hybrid
+    from bayeshopf.simulators import simulate_recordings
+
+    out_file = OUT_EFFECTS if effects else OUT
+    out = json.loads(out_file.read_text())
+    for s in out["systems"]:
+        system, diagram, _, _ = draw_system(s["seed"], effects)
+        fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
+        plan = [(fold + x * (hopf - fold), "stable") for x in STABLE_AT] + \
+               [(fold + x * (hopf - fold), "unstable") for x in UNSTABLE_AT]
+        rs = simulate_recordings(system, [m for m, _ in plan], [b for _, b in plan],
+                                 noise=NOISE, duration_s=DURATION_S, sample_rate_hz=RATE_HZ,
+                                 seed=s["seed"], diagram=diagram)
+        post = fit_hybrid(extract_harmonics(rs), "subcritical", seed=0,
+                          settings=CollapsedSettings(), progress=False)
+        errs = [e["relative"] for e in post.orbit_error() if e["relative"] is not None]
+        s["in_sample"] = {"sigma_rel": float(np.median(post.samples["sigma_rel"])),
+                          "max_orbit_error": float(max(errs)),
+                          "warnings": post.diagnostics["warnings"]}
+        r = [f["r"] for f in s["folds"]]
+        print(f"seed {s['seed']} {s['params'].get('effect', '')}: σ_rel "
+              f"{s['in_sample']['sigma_rel']:.4f}, largest orbit error "
+              f"{s['in_sample']['max_orbit_error']:.3f}, {len(post.diagnostics['warnings'])} "
+              f"warnings; held out: median |r| {np.nanmedian(np.abs(r)):.3f}", flush=True)
+    atomic_write(out_file, json.dumps(out, indent=1))
+
+
 def rig():
     """The rig's leave-one-out residuals, on the same footing (added to the JSON as ``rig``)."""
     from bayeshopf.inference.cache import configure_xla_cpu
@@ -251,6 +295,8 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if "--rig" in args:
         rig()
+    elif "--in-sample" in args:
+        in_sample(effects="--effects" in args)
     else:
         main(int(args[args.index("--systems") + 1]) if "--systems" in args else 12,
              effects="--effects" in args, resume="--resume" in args)

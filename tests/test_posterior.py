@@ -258,3 +258,17 @@ def test_a_planted_response_to_the_control_is_recovered_and_needed():
     assert free.spec.control_scale is None and free.control_gain() is None
     missed = [e["relative"] for e in free.diagnostics["fit"]["orbit_error"]]
     assert max(missed) > 2 * max(errors), (missed, errors)
+
+
+def test_a_large_relative_model_error_warns_that_new_bands_are_not_calibrated(planted):
+    """Above the 2% limit the warning also says that bands away from the recordings are
+    not calibrated (simulated rigs whose fits fail this check: 8 of 28 held out inside,
+    ``benchmarks/loo_reference_class_effects.json``); below it, no such warning."""
+    from bayeshopf.posterior import SIGMA_REL_MAX, diagnose
+
+    post, _, _ = planted
+    assert not [w for w in diagnose(post)["warnings"] if "relative model error" in w]
+    chains = {**post.run.chains, "sigma_rel": post.run.chains["sigma_rel"] + 2 * SIGMA_REL_MAX}
+    bad = replace(post, run=replace(post.run, chains=chains))
+    (w,) = [w for w in diagnose(bad)["warnings"] if "relative model error" in w]
+    assert "not calibrated" in w and "fit --leave-one-out" in w
