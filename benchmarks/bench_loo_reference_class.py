@@ -145,6 +145,18 @@ def draw_system(seed, effects=False):
     return system, diagram, values, ""
 
 
+def record(system, diagram, seed):
+    """The design's seven recordings of a kept system (module docstring), noise seed ``seed``."""
+    from bayeshopf.simulators import simulate_recordings
+
+    fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
+    plan = [(fold + x * (hopf - fold), "stable") for x in STABLE_AT] + \
+           [(fold + x * (hopf - fold), "unstable") for x in UNSTABLE_AT]
+    return simulate_recordings(system, [m for m, _ in plan], [b for _, b in plan], noise=NOISE,
+                               duration_s=DURATION_S, sample_rate_hz=RATE_HZ, seed=seed,
+                               diagram=diagram)
+
+
 def main(n_systems=12, effects=False, resume=False, second=False):
     from bayeshopf.inference.cache import configure_xla_cpu
 
@@ -152,7 +164,6 @@ def main(n_systems=12, effects=False, resume=False, second=False):
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
-    from bayeshopf.simulators import simulate_recordings
 
     settings = CollapsedSettings()
     systems, skipped, t0 = [], [], time.perf_counter()
@@ -172,12 +183,8 @@ def main(n_systems=12, effects=False, resume=False, second=False):
             seed += 1
             continue
         fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
-        plan = [(fold + x * (hopf - fold), "stable") for x in STABLE_AT] + \
-               [(fold + x * (hopf - fold), "unstable") for x in UNSTABLE_AT]
         try:
-            rs = simulate_recordings(system, [m for m, _ in plan], [b for _, b in plan],
-                                     noise=NOISE, duration_s=DURATION_S,
-                                     sample_rate_hz=RATE_HZ, seed=seed, diagram=diagram)
+            rs = record(system, diagram, seed)
         except Exception as e:                   # a branch that ends before the design's μ
             skipped.append({"seed": seed, "why": f"{type(e).__name__}: {e}"})
             print(f"seed {seed}: skipped ({e})", flush=True)
@@ -249,18 +256,12 @@ def in_sample(effects=True, second=False):
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
-    from bayeshopf.simulators import simulate_recordings
 
     out_file = (OUT_EFFECTS_B if second else OUT_EFFECTS) if effects else OUT
     out = json.loads(out_file.read_text())
     for s in out["systems"]:
         system, diagram, _, _ = draw_system(s["seed"], effects)
-        fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
-        plan = [(fold + x * (hopf - fold), "stable") for x in STABLE_AT] + \
-               [(fold + x * (hopf - fold), "unstable") for x in UNSTABLE_AT]
-        rs = simulate_recordings(system, [m for m, _ in plan], [b for _, b in plan],
-                                 noise=NOISE, duration_s=DURATION_S, sample_rate_hz=RATE_HZ,
-                                 seed=s["seed"], diagram=diagram)
+        rs = record(system, diagram, s["seed"])
         post = fit_hybrid(extract_harmonics(rs), "subcritical", seed=0,
                           settings=CollapsedSettings(), progress=False)
         errs = [e["relative"] for e in post.orbit_error() if e["relative"] is not None]
