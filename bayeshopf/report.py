@@ -281,7 +281,7 @@ def _extrapolation_data(post) -> dict | None:
         return None
     f = post.features
     return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist(),
-            "scale": float(post.settings.extrapolation_scale)}
+            "scale": float(post.extrapolation_scale)}
 
 
 @dataclass(frozen=True)

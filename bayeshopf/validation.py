@@ -121,6 +121,9 @@ class Fold:
         predictions: Method name → :class:`HeldOut`.
         fit: The fold's :class:`~bayeshopf.posterior.HybridPosterior` (kept only when asked;
             both methods come from it).
+        extrapolation_scale: The scale ``S`` of the model error away from the
+            recordings of this fold's refit (its own, by its relative model error,
+            unless set; 0 when off).
     """
 
     name: str
@@ -130,6 +133,7 @@ class Fold:
     measured_sd: float
     predictions: dict
     fit: HybridPosterior | None = None
+    extrapolation_scale: float = cm.EXTRAPOLATION_SCALE
 
     def inside(self, method: str) -> bool:
         """Whether the measured amplitude lies in ``method``'s 90% band (ends included)."""
@@ -152,13 +156,18 @@ class LeaveOneOut:
     Attributes:
         folds: One :class:`Fold` per held-out recording.
         methods: Methods compared.
-        extrapolation_scale: The fits' prior scale ``S`` of the model error away
-            from the recordings (0 when the fits had it off).
     """
 
     folds: tuple[Fold, ...]
     methods: tuple[str, ...]
-    extrapolation_scale: float = cm.EXTRAPOLATION_SCALE
+
+    @property
+    def extrapolation_scales(self) -> tuple[float, ...]:
+        """The refits' scales ``S`` of the model error away from the recordings, sorted, unique.
+
+        Each fold's refit chooses its own by default (by its relative model error).
+        """
+        return tuple(sorted({f.extrapolation_scale for f in self.folds}))
 
     def coverage(self, method: str) -> int:
         """Number of folds whose held-out amplitude lies in the 90% band."""
@@ -216,9 +225,11 @@ class LeaveOneOut:
             "recordings are too narrow for these data"
             + ("" if not np.isfinite(s_hat) else
                f" (the held-out residuals choose a model-error scale of {s_hat:.2g} away from "
-               f"the recordings; the prior's is {self.extrapolation_scale:g})"))
+               f"the recordings; the prior's is {_scales_text(self.extrapolation_scales)})"))
         return {"method": method, "inside_ci90": k, "n_folds": n, "coverage_p": p,
-                "alpha": alpha, "ok": ok, "prior_scale": self.extrapolation_scale,
+                "alpha": alpha, "ok": ok,
+                "prior_scale": _scales_text(self.extrapolation_scales),
+                "prior_scales": [f.extrapolation_scale for f in self.folds],
                 "held_out_scale": s_hat, "warning": warning}
 
     def report(self, method: str = "bayes") -> dict:
@@ -294,7 +305,8 @@ class LeaveOneOut:
         """One row per fold (JSON-ready)."""
         rows = []
         for f in self.folds:
-            row = {"file": f.name, "mu": f.mu, "branch": f.branch, "measured": f.measured}
+            row = {"file": f.name, "mu": f.mu, "branch": f.branch, "measured": f.measured,
+                   "extrapolation_scale": f.extrapolation_scale}
             for m in self.methods:
                 p = f.predictions[m]
                 row[m] = {"median": p.median, "ci90": [p.lo, p.hi], "inside": f.inside(m),
@@ -502,7 +514,12 @@ def leave_one_out(
                  for m in methods}
         out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
                         measured_sd=float(features.amplitude_sd[i]), predictions=preds,
-                        fit=post if keep_fits else None))
-    return LeaveOneOut(folds=tuple(out), methods=methods,
-                       extrapolation_scale=settings.extrapolation_scale
-                       if settings.extrapolation else 0.0)
+                        fit=post if keep_fits else None,
+                        extrapolation_scale=post.extrapolation_scale
+                        if settings.extrapolation else 0.0))
+    return LeaveOneOut(folds=tuple(out), methods=methods)
+
+
+def _scales_text(scales) -> str:
+    """``"0.1"``, or ``"0.1–0.7"`` when the folds' refits chose different scales."""
+    return f"{scales[0]:g}" if len(scales) == 1 else f"{scales[0]:g}–{scales[-1]:g}"

@@ -52,8 +52,9 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
     p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
                    help="half-normal scale of the model error away from the recordings, in "
-                   "log orbit size (default 0.1): it widens new measurements' bands between "
-                   "and beyond the recordings only; set it from other rigs' leave-one-out")
+                   "log orbit size (default: 0.1, or 0.7 when the fit's relative model error "
+                   "is above 2%%): it widens new measurements' bands between and beyond the "
+                   "recordings only; set it from other rigs' leave-one-out")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -247,7 +248,7 @@ def _print_leave_one_out(summary: dict) -> None:
     print(f"{c['inside_ci90']}/{c['n_folds']} held-out amplitudes inside their bands (P = "
           f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}")
     if c.get("held_out_scale") is not None:
-        print(f"model error away from the recordings: prior scale {c['prior_scale']:g}; the "
+        print(f"model error away from the recordings: prior scale {c['prior_scale']}; the "
               f"held-out residuals' own {c['held_out_scale']:.2g} (read off these recordings)")
 
 
@@ -267,6 +268,13 @@ def _print_diagnostics(summary: dict) -> None:
     if errs:
         print(f"orbit errors (posterior-median orbit against the measured mean orbit): "
               f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
+    away = diag["fit"].get("extrapolation_scale")
+    if away:
+        why = ("as set" if away["chosen_by"] == "setting" else
+               f"relative model error {100 * diag['fit']['sigma_rel']:.1f}%, "
+               f"{'above' if diag['fit']['sigma_rel'] > 0.02 else 'within'} the 2% limit")
+        print(f"bands of new measurements away from the recordings: model-error scale "
+              f"{away['scale']:g} ({why})")
     for w in diag.get("warnings", []):
         print(f"warning: {w}")
 
@@ -299,8 +307,8 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
                        "(e.g. 0.9)")
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (the "
-                       "default is 0.1)")
+        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
+                       "default 0.1, or 0.7 for a fit whose relative model error is above 2%)")
     report.check_output_folder(out, args.force)
     worker = None
     if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process

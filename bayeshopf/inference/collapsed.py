@@ -101,10 +101,14 @@ class CollapsedSettings:
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
         extrapolation_scale: Half-normal scale ``S`` of that error's amplitude,
-            ``s_e ~ HalfNormal(S)``, in log orbit size (default
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`). It changes the
-            bands of new measurements only; set it from other rigs' leave-one-out,
-            not from the recordings being validated.
+            ``s_e ~ HalfNormal(S)``, in log orbit size. ``None`` (the default) lets
+            the fit choose by its relative model error σ_rel:
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1) where
+            ``σ_rel ≤`` :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7)
+            above (:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`).
+            It changes the bands of new measurements only; set it from other rigs'
+            leave-one-out, not from the recordings being validated.
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").
@@ -129,15 +133,17 @@ class CollapsedSettings:
     frequency: bool = True
     extrapolation: bool = True
     control: bool = True
-    extrapolation_scale: float = cm.EXTRAPOLATION_SCALE
+    extrapolation_scale: float | None = None
 
     def __post_init__(self):
         s = self.extrapolation_scale
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) \
-                or s <= 0:
-            raise FitError("extrapolation_scale: a positive number expected (the half-normal "
-                           "scale of the model error away from the recordings, in log orbit "
-                           f"size; default {cm.EXTRAPOLATION_SCALE}); got {s!r}")
+        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
+                              or not math.isfinite(s) or s <= 0):
+            raise FitError("extrapolation_scale: a positive number or None expected (the "
+                           "half-normal scale of the model error away from the recordings, "
+                           f"in log orbit size; None: {cm.EXTRAPOLATION_SCALE} or "
+                           f"{cm.EXTRAPOLATION_SCALE_MISFIT} by the fit's relative model "
+                           f"error); got {s!r}")
 
     @classmethod
     def fast(cls) -> CollapsedSettings:

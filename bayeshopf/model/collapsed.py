@@ -101,12 +101,17 @@ says it is):
            c_b(μ)^2 = 1 - k_*^T K^{-1} k_*,\quad
            k(μ, μ') = e^{-(μ-μ')^2 / 2ℓ^2},
 
-``s_e ~ HalfNormal(`` :data:`EXTRAPOLATION_SCALE` ``)``, ``ℓ =``
-:data:`EXTRAPOLATION_LENGTH` ``· Δμ`` (both fixed before any rig run, for the
-radius discrepancy tried in the likelihood; ``docs/inference_core.md``). It is
-zero at every training recording, so it changes neither the posterior nor the
-training checks; it widens the band of a new measurement between and beyond
-the recordings, where the normal form's fit is an inter- or extrapolation.
+``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``. ``S`` is
+:data:`EXTRAPOLATION_SCALE` (fixed before any rig run, for the radius
+discrepancy tried in the likelihood) for a fit that passes its own
+relative-model-error check, ``σ_rel ≤`` :data:`SIGMA_REL_LIMIT`, and
+:data:`EXTRAPOLATION_SCALE_MISFIT` for one that does not: on simulated rigs
+lacking one piece of physics, the passing fits' held-out amplitudes lie in
+their bands at the first scale and the flagged fits' need the second
+(``docs/inference_core.md``). It is zero at every training recording, so it
+changes neither the posterior nor the training checks; it widens the band of a
+new measurement between and beyond the recordings, where the normal form's fit
+is an inter- or extrapolation.
 """
 
 from __future__ import annotations
@@ -142,8 +147,16 @@ SIGMA_OMEGA_PRIOR = 0.01
 #: Terms ``(r̃²)^i μ̃^j`` of the phase speed ``Ω(r, μ) − ω̄``, as ``(i, j)``: the
 #: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
 FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
-#: Half-normal scale of the model error away from the recordings, ``s_e`` (log orbit size).
+#: Half-normal scale of the model error away from the recordings, ``s_e`` (log orbit size),
+#: of a fit whose relative model error σ_rel passes its check (:data:`SIGMA_REL_LIMIT`).
 EXTRAPOLATION_SCALE = 0.1
+#: The same for a fit whose σ_rel is above :data:`SIGMA_REL_LIMIT`: the scale the held-out
+#: residuals of the simulated rigs with missing physics that the check flags choose,
+#: pooled (``docs/inference_core.md``, "The class with missing physics").
+EXTRAPOLATION_SCALE_MISFIT = 0.7
+#: Relative model error σ_rel (posterior median) above which a fit misses the orbits'
+#: sizes: its prior scale, 2% of each coefficient.
+SIGMA_REL_LIMIT = 0.02
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0
 #: Prior sd of the control's complex gain ``H`` in units of ``ρ / ū`` (module docstring).
