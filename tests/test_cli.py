@@ -546,7 +546,7 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
     seen.clear()
     assert main(["demo", "--fast", "--out", str(tmp_path / "b"), "--no-figures"]) == 2
     capsys.readouterr()
-    assert seen["settings"].extrapolation_scale == 0.1
+    assert seen["settings"].extrapolation_scale is None      # chosen by the fit's σ_rel
     for bad in ("0", "-1", "nan"):
         seen.clear()
         assert main(["demo", "--fast", "--out", str(tmp_path / "c"), "--no-figures",

@@ -117,6 +117,9 @@ def test_leave_one_out_refits_without_the_held_out_recording_and_predicts_it(one
     rows = json.loads(json.dumps(loo.table()))
     assert rows[0]["file"] == name and {"bayes", "map"} <= set(rows[0])
     assert all(np.isfinite(rows[0][m]["median"]) for m in loo.methods)
+    # the fold's scale away from the recordings is its refit's own (by its σ_rel)
+    assert fold.extrapolation_scale == fold.fit.extrapolation_scale == \
+        rows[0]["extrapolation_scale"]
 
 
 def test_plug_in_map_is_the_conditional_mean_and_fits_the_training_orbits(one_fold):
@@ -204,7 +207,8 @@ def test_check_flags_a_coverage_improbable_for_calibrated_bands(k, flagged):
         assert f"P = {_binomial_cdf(k, 7, 0.9):.2g}" in c["warning"]
         # how much too narrow: the misses (log residual log 2 at c = 0.5) choose a scale
         # far above the prior's
-        assert c["held_out_scale"] > 0.5 and c["prior_scale"] == 0.1
+        assert c["held_out_scale"] > 0.5 and c["prior_scale"] == "0.1"
+        assert c["prior_scales"] == [0.1] * 7
         assert f"scale of {c['held_out_scale']:.2g} away from the recordings; the prior's " \
                "is 0.1" in c["warning"]
     else:
@@ -212,6 +216,19 @@ def test_check_flags_a_coverage_improbable_for_calibrated_bands(k, flagged):
     rep = json.loads(json.dumps(loo.report("bayes")))
     assert rep["check"] == c and rep["summary"]["coverage"] == k
     assert [r["bayes"]["inside"] for r in rep["folds"]] == [True] * k + [False] * (7 - k)
+
+
+def test_check_names_the_scales_each_refit_chose():
+    """Refits that chose different scales (by their own relative model error) are all named."""
+    from dataclasses import replace
+
+    loo = _study(3)
+    mixed = LeaveOneOut(folds=tuple(replace(f, extrapolation_scale=0.7 if i % 2 else 0.1)
+                                    for i, f in enumerate(loo.folds)), methods=("bayes",))
+    c = mixed.check("bayes")
+    assert mixed.extrapolation_scales == (0.1, 0.7)
+    assert c["prior_scale"] == "0.1–0.7" and c["prior_scales"] == [0.1, 0.7] * 3 + [0.1]
+    assert "the prior's is 0.1–0.7)" in c["warning"]
 
 
 @pytest.mark.parametrize("s0", [0.0, 0.25])

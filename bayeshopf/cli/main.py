@@ -52,9 +52,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
     p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
                    help="half-normal scale of the model error away from the recordings, in "
-                   "log orbit size (default: 0.1, or 0.7 when the fit's relative model error "
-                   "is above 2%%): it widens new measurements' bands between and beyond the "
-                   "recordings only; set it from other rigs' leave-one-out")
+                   "log orbit size (default: 0.1, or 0.7 when the 90%% interval of the fit's "
+                   "relative model error lies above 2%%): it widens new measurements' bands "
+                   "between and beyond the recordings only; set it from other rigs' "
+                   "leave-one-out")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -270,9 +271,11 @@ def _print_diagnostics(summary: dict) -> None:
               f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
     away = diag["fit"].get("extrapolation_scale")
     if away:
+        lo, hi = away["sigma_rel_ci90"]
         why = ("as set" if away["chosen_by"] == "setting" else
-               f"relative model error {100 * diag['fit']['sigma_rel']:.1f}%, "
-               f"{'above' if diag['fit']['sigma_rel'] > 0.02 else 'within'} the 2% limit")
+               f"relative model error {100 * diag['fit']['sigma_rel']:.1f}% [{100 * lo:.1f}, "
+               f"{100 * hi:.1f}]: {'credibly above' if lo > 0.02 else 'not credibly above'} "
+               "the 2% limit")
         print(f"bands of new measurements away from the recordings: model-error scale "
               f"{away['scale']:g} ({why})")
     for w in diag.get("warnings", []):
@@ -308,7 +311,8 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
         raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
-                       "default 0.1, or 0.7 for a fit whose relative model error is above 2%)")
+                       "default 0.1, or 0.7 for a fit whose relative model error is credibly above "
+                       "2%)")
     report.check_output_folder(out, args.force)
     worker = None
     if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process

@@ -103,10 +103,11 @@ class CollapsedSettings:
         extrapolation_scale: Half-normal scale ``S`` of that error's amplitude,
             ``s_e ~ HalfNormal(S)``, in log orbit size. ``None`` (the default) lets
             the fit choose by its relative model error σ_rel:
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1) where
-            ``σ_rel ≤`` :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7)
-            above (:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`).
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7) where
+            σ_rel's 90% interval lies above
+            :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1) otherwise
+            (:func:`~bayeshopf.posterior.default_extrapolation_scale`).
             It changes the bands of new measurements only; set it from other rigs'
             leave-one-out, not from the recordings being validated.
         control: Whether the model includes the response to the control's
