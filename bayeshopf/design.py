@@ -209,7 +209,8 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
         mu_data = f.mu[f.unstable == (branch == "unstable")]
         factor = bp.extrapolation_factor([mu], mu_data, fit.spec.mu_span,
                                          c.shape[0] * N_REPLICATES, int(rng.integers(2**31)),
-                                         scale=fit.extrapolation_scale)
+                                         scale=np.repeat(fit.extrapolation_scales(
+                                             c.shape[0]), N_REPLICATES))
         c = bp.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
     idx = bp.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
     sd = bp.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],

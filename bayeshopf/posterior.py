@@ -75,27 +75,37 @@ def _common_over_mu(rng, shape) -> np.ndarray:
     return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
 
 
-def default_extrapolation_scale(sigma_rel) -> float:
-    """The scale ``S`` of the model error away from the recordings a fit gets by default.
+def default_extrapolation_scale(sigma_rel) -> np.ndarray:
+    """The scale ``S`` of the model error away from the recordings, per posterior draw.
 
-    ``S = 0.7`` where the fit's relative model error is credibly above its 2%
-    limit, its 90% interval above it (the draws' 5% quantile ``> 2%``), and
-    ``S = 0.1`` otherwise (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
+    ``S = 0.7`` in a draw whose relative model error σ_rel is above the 2% limit
+    and ``S = 0.1`` in the others
+    (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
     :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
-    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`). A fit that misses the
-    orbits' sizes in-sample lacks physics, and its extrapolation may err by
-    more: on simulated rigs lacking one effect, the fits whose σ_rel passes the
-    check hold 110 of 112 held-out amplitudes at 0.1, and the held-out residuals
-    of those it flags choose 0.7 (``docs/inference_core.md``, "The class with
-    missing physics"). The interval, not the median, decides: a fit of a few
-    recordings has a σ_rel near its prior, whose median is close to the limit.
+    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
+    measurement's band averages over whether the fit misses the orbits' sizes.
+    A fit that misses them in-sample lacks physics, and its extrapolation may
+    err by more: on simulated rigs lacking one effect, the fits whose σ_rel
+    passes the check hold 110 of 112 held-out amplitudes at 0.1, and the
+    held-out residuals of those it flags choose 0.7 (``docs/inference_core.md``,
+    "The class with missing physics"). Per draw, not by the median: a fit of a
+    few recordings has a σ_rel near its prior, whose median lies close to the
+    limit, and its bands then widen in part, not all at once.
 
     Args:
         sigma_rel: Posterior draws of σ_rel.
     """
-    lower = float(np.quantile(np.asarray(sigma_rel, dtype=float), 0.5 - CI / 2))
-    return cm.EXTRAPOLATION_SCALE_MISFIT if lower > cm.SIGMA_REL_LIMIT \
-        else cm.EXTRAPOLATION_SCALE
+    return np.where(np.asarray(sigma_rel, dtype=float) > cm.SIGMA_REL_LIMIT,
+                    cm.EXTRAPOLATION_SCALE_MISFIT, cm.EXTRAPOLATION_SCALE)
+
+
+def rms_scale(scales) -> float:
+    """``sqrt(mean S²)``: the sd of the log factor per unit ``c`` when ``S`` varies by draw.
+
+    ``E[s²] = S²`` for ``s ~ HalfNormal(S)``.
+    """
+    s = np.asarray(scales, dtype=float)
+    return float(s[0]) if np.all(s == s[0]) else float(np.sqrt(np.mean(np.square(s))))
 
 
 def branch_sign(branch: str) -> float:
@@ -150,16 +160,31 @@ class HybridPosterior:
         """Draws of the nonlinear parameters the map and orbits need."""
         return {k: v for k, v in self.samples.items() if not k.startswith("marginal")}
 
+    def extrapolation_scales(self, n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
+        """The scale ``S`` of the model error away from the recordings, per draw.
+
+        For the draws :meth:`orbit_coefficients` uses with ``n_draws``:
+        ``settings.extrapolation_scale`` when it is set, otherwise chosen by each
+        draw's relative model error (:func:`default_extrapolation_scale`).
+        """
+        idx = self._draw_indices(n_draws)
+        s = self.settings.extrapolation_scale
+        if s is not None:
+            return np.full(len(idx), float(s))
+        return default_extrapolation_scale(np.asarray(self.samples["sigma_rel"])[idx])
+
     @property
     def extrapolation_scale(self) -> float:
-        """The scale ``S`` of the model error away from the recordings these bands use.
+        """The rms of :meth:`extrapolation_scales` over all draws (:func:`rms_scale`).
 
-        ``settings.extrapolation_scale`` when it is set; otherwise chosen by the
-        fit's own relative model error (:func:`default_extrapolation_scale`).
+        The setting when it is set; 0.1 when no draw's σ_rel is above the limit.
         """
-        s = self.settings.extrapolation_scale
-        return float(s) if s is not None else default_extrapolation_scale(
-            self.samples["sigma_rel"])
+        return rms_scale(self.extrapolation_scales(None))
+
+    @property
+    def p_misfit(self) -> float:
+        """The posterior probability that the relative model error σ_rel is above its 2% limit."""
+        return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
         """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
@@ -239,9 +264,9 @@ class HybridPosterior:
             return coeffs
         f = self.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
+        n = np.shape(coeffs)[0]
         return scale_orbits(coeffs, extrapolation_factor(
-            mu, mu_data, self.spec.mu_span, np.shape(coeffs)[0], self.seed,
-            scale=self.extrapolation_scale))
+            mu, mu_data, self.spec.mu_span, n, self.seed, scale=self.extrapolation_scales(n)))
 
     def control_gain(self, ci: float = CI) -> dict | None:
         """The orbits' response to the control's fundamental, or ``None`` without the term.
@@ -714,7 +739,7 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
 
 
 def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
-                         scale: float = cm.EXTRAPOLATION_SCALE) -> np.ndarray:
+                         scale=cm.EXTRAPOLATION_SCALE) -> np.ndarray:
     """Draws of ``e^{δ_b(μ)}``, the model error away from the recordings, ``(n, n_mu)``.
 
     ``δ_b(μ) = s_e z c_b(μ)`` with ``s_e ~ HalfNormal(scale)`` and
@@ -728,10 +753,11 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
         mu_span: The recordings' μ span Δμ.
         n: Draws.
         seed: Seed (its own stream, apart from the measurement noise's).
-        scale: Half-normal scale of ``s_e`` (``CollapsedSettings.extrapolation_scale``).
+        scale: Half-normal scale of ``s_e``, one for all draws or ``(n,)``, one per
+            draw (:meth:`HybridPosterior.extrapolation_scales`).
     """
     rng = np.random.default_rng([seed, 1])
-    s = np.abs(rng.normal(0.0, scale, n))
+    s = np.abs(rng.normal(0.0, np.broadcast_to(scale, (n,)), n))
     z = rng.standard_normal(n)
     c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
     return np.exp((s * z)[:, None] * c[None])
@@ -886,6 +912,7 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
             "scale": post.extrapolation_scale,
             "chosen_by": ("setting" if post.settings.extrapolation_scale is not None
                           else "relative model error"),
+            "p_above_limit": post.p_misfit,
             "sigma_rel_ci90": [float(q) for q in np.quantile(
                 np.asarray(post.samples["sigma_rel"]), [0.5 - CI / 2, 0.5 + CI / 2])]}
     for e in errs:
@@ -918,12 +945,11 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
                         f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
                         "fraction, and the predictive bands are that wide for that reason; "
-                        + (f"its 90% interval lies above the limit, so bands of new "
-                           f"measurements away from the recordings use the wider model-error "
-                           f"scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such fits and may "
-                           "still be too narrow"
-                           if post.settings.extrapolation_scale is None
-                           and post.extrapolation_scale == cm.EXTRAPOLATION_SCALE_MISFIT else
+                        + (f"bands of new measurements away from the recordings use the "
+                           f"wider model-error scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such "
+                           f"fits in the {100 * post.p_misfit:.0f}% of the draws above the "
+                           "limit, and may still be too narrow"
+                           if post.settings.extrapolation_scale is None else
                            "bands of new measurements away from the recordings are not "
                            "calibrated for such a fit")
                         + " (check them with fit --leave-one-out)")

@@ -43,7 +43,12 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import DataError, OutputError
-from bayeshopf.model.collapsed import EXTRAPOLATION_SCALE, CollapsedSpec
+from bayeshopf.model.collapsed import (
+    EXTRAPOLATION_SCALE,
+    EXTRAPOLATION_SCALE_MISFIT,
+    SIGMA_REL_LIMIT,
+    CollapsedSpec,
+)
 
 SUMMARY = "summary.json"
 POSTERIOR = "posterior.nc"
@@ -281,7 +286,9 @@ def _extrapolation_data(post) -> dict | None:
         return None
     f = post.features
     return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist(),
-            "scale": float(post.extrapolation_scale)}
+            "scale": post.settings.extrapolation_scale,
+            "base_scale": EXTRAPOLATION_SCALE, "misfit_scale": EXTRAPOLATION_SCALE_MISFIT,
+            "sigma_rel_limit": SIGMA_REL_LIMIT}
 
 
 @dataclass(frozen=True)
@@ -378,12 +385,27 @@ class SavedHybrid:
             if self.extrapolation is not None:
                 c = bp.scale_orbits(c, bp.extrapolation_factor(
                     [mu], self.extrapolation[f"mu_{branch}"], self.spec.mu_span, c.shape[0],
-                    int(self.summary.get("seed", 0)),
-                    scale=self.extrapolation.get("scale", EXTRAPOLATION_SCALE)))
+                    int(self.summary.get("seed", 0)), scale=self._extrapolation_scales(s)))
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
             sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
             c = c + sd * rng.standard_normal(c.shape)
         return bp.amplitude_of(self.spec, c)[:, 0]
+
+    def _extrapolation_scales(self, s: dict) -> np.ndarray:
+        """The scale of the model error away from the recordings per draw of ``s``.
+
+        The saved setting, or 0.7 where σ_rel is above its limit and 0.1 elsewhere
+        (:func:`~bayeshopf.posterior.default_extrapolation_scale`); a folder of an
+        older version saved one scale for all draws.
+        """
+        e = self.extrapolation
+        n = len(s["sigma_rel"])
+        if e.get("scale") is not None:
+            return np.full(n, float(e["scale"]))
+        if "misfit_scale" not in e:
+            return np.full(n, EXTRAPOLATION_SCALE)
+        above = np.asarray(s["sigma_rel"]) > e["sigma_rel_limit"]
+        return np.where(above, e["misfit_scale"], e["base_scale"])
 
     def predict(self, mu: float, branch: str = "stable", predictive: bool = False,
                 ci: float = CI) -> Interval:

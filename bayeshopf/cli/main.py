@@ -52,8 +52,8 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
     p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
                    help="half-normal scale of the model error away from the recordings, in "
-                   "log orbit size (default: 0.1, or 0.7 when the 90%% interval of the fit's "
-                   "relative model error lies above 2%%): it widens new measurements' bands "
+                   "log orbit size (default: per posterior draw 0.1, or 0.7 where the fit's "
+                   "relative model error is above 2%%): it widens new measurements' bands "
                    "between and beyond the recordings only; set it from other rigs' "
                    "leave-one-out")
 
@@ -271,13 +271,11 @@ def _print_diagnostics(summary: dict) -> None:
               f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
     away = diag["fit"].get("extrapolation_scale")
     if away:
-        lo, hi = away["sigma_rel_ci90"]
         why = ("as set" if away["chosen_by"] == "setting" else
-               f"relative model error {100 * diag['fit']['sigma_rel']:.1f}% [{100 * lo:.1f}, "
-               f"{100 * hi:.1f}]: {'credibly above' if lo > 0.02 else 'not credibly above'} "
-               "the 2% limit")
+               f"the rms over the draws: 0.7 in the {100 * away['p_above_limit']:.0f}% whose "
+               "relative model error is above the 2% limit, 0.1 in the others")
         print(f"bands of new measurements away from the recordings: model-error scale "
-              f"{away['scale']:g} ({why})")
+              f"{away['scale']:.2g} ({why})")
     for w in diag.get("warnings", []):
         print(f"warning: {w}")
 
@@ -311,7 +309,7 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
         raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
-                       "default 0.1, or 0.7 for a fit whose relative model error is credibly above "
+                       "default per draw 0.1, or 0.7 where the relative model error is above "
                        "2%)")
     report.check_output_folder(out, args.force)
     worker = None

@@ -102,10 +102,9 @@ class CollapsedSettings:
             zero at the training recordings, so the fit and its checks do not change).
         extrapolation_scale: Half-normal scale ``S`` of that error's amplitude,
             ``s_e ~ HalfNormal(S)``, in log orbit size. ``None`` (the default) lets
-            the fit choose by its relative model error σ_rel:
+            each posterior draw choose by its relative model error σ_rel:
             :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7) where
-            σ_rel's 90% interval lies above
-            :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
+            σ_rel is above :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
             :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1) otherwise
             (:func:`~bayeshopf.posterior.default_extrapolation_scale`).
             It changes the bands of new measurements only; set it from other rigs'

@@ -103,9 +103,9 @@ says it is):
 
 ``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``. ``S`` is
 :data:`EXTRAPOLATION_SCALE` (fixed before any rig run, for the radius
-discrepancy tried in the likelihood) for a fit whose relative model error is
-not credibly above :data:`SIGMA_REL_LIMIT`, and :data:`EXTRAPOLATION_SCALE_MISFIT`
-for one whose σ_rel's 90% interval lies above it: on simulated rigs
+discrepancy tried in the likelihood) in a posterior draw whose relative model
+error σ_rel is within :data:`SIGMA_REL_LIMIT`, and :data:`EXTRAPOLATION_SCALE_MISFIT`
+in one where it is above: on simulated rigs
 lacking one piece of physics, the passing fits' held-out amplitudes lie in
 their bands at the first scale and the flagged fits' need the second
 (``docs/inference_core.md``). It is zero at every training recording, so it
@@ -150,8 +150,8 @@ FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
 #: Half-normal scale of the model error away from the recordings, ``s_e`` (log orbit size),
 #: of a fit whose relative model error σ_rel passes its check (:data:`SIGMA_REL_LIMIT`).
 EXTRAPOLATION_SCALE = 0.1
-#: The same for a fit whose σ_rel is credibly above :data:`SIGMA_REL_LIMIT` (its 90%
-#: interval above it; ``posterior.default_extrapolation_scale``): the scale the held-out
+#: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
+#: (``posterior.default_extrapolation_scale``): the scale the held-out
 #: residuals of the simulated rigs with missing physics that the check flags choose,
 #: pooled (``docs/inference_core.md``, "The class with missing physics").
 EXTRAPOLATION_SCALE_MISFIT = 0.7
