@@ -9,6 +9,19 @@ similar amplitude (its segments' standard error) and the model error away from
 the recordings. Write ``τ_s`` for that scatter's standard deviation (estimated
 from :data:`N_REPLICATES` replicates per draw).
 
+The model error away from the recordings enters at its base scale
+(:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`, or the scale the fit was
+given), not at the wider scale the draws of a fit whose relative model error
+is above its limit take for bands of new measurements
+(:func:`~bayeshopf.posterior.default_extrapolation_scale`). That wider scale
+says where a new measurement may land when the fit lacks physics; as scatter
+in ``τ_s`` it would discount every candidate away from the recordings, near
+the fold most, in fits of a few recordings whose relative model error is still
+near its prior (notebook 05's campaign then stalled below the true fold). The
+ranking and the table's amplitude bands use these replicates; for a fit that
+misses the orbits, ``predict --predictive`` gives the wider bands of a new
+measurement.
+
 The posterior of a target ``T`` (``μ_fold``, ``μ0``, or the amplitude at
 each μ of the diagram) after measuring ``y`` is the current posterior
 reweighted by the likelihood of ``y`` (importance sampling; no refit):
@@ -52,6 +65,7 @@ import numpy as np
 
 from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.errors import FitError
+from bayeshopf.model import collapsed as cm
 from bayeshopf.posterior import N_BAND_DRAWS as N_DRAWS  # the bands' draws, aligned
 
 __all__ = ["Candidate", "DesignResult", "TARGETS", "candidate_grid", "next_measurements"]
@@ -207,10 +221,10 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     if fit.settings.extrapolation:
         f = fit.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
+        scale = fit.settings.extrapolation_scale
         factor = bp.extrapolation_factor([mu], mu_data, fit.spec.mu_span,
                                          c.shape[0] * N_REPLICATES, int(rng.integers(2**31)),
-                                         scale=np.repeat(fit.extrapolation_scales(
-                                             c.shape[0]), N_REPLICATES))
+                                         scale=cm.EXTRAPOLATION_SCALE if scale is None else scale)
         c = bp.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
     idx = bp.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
     sd = bp.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],

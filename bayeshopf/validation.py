@@ -521,5 +521,5 @@ def leave_one_out(
 
 
 def _scales_text(scales) -> str:
-    """``"0.1"``, or ``"0.1–0.7"`` when the folds' refits chose different scales."""
-    return f"{scales[0]:g}" if len(scales) == 1 else f"{scales[0]:g}–{scales[-1]:g}"
+    """``"0.1"``, or ``"0.48–0.68"`` when the folds' refits chose different (rms) scales."""
+    return f"{scales[0]:.2g}" if len(scales) == 1 else f"{scales[0]:.2g}–{scales[-1]:.2g}"

@@ -357,6 +357,14 @@ def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, mon
     printed = capsys.readouterr().out
     assert "80% interval" in printed and "predicted (80%)" in printed
     assert "inside their 80% predictive intervals" in printed
+    # the scale of the model error away from the recordings, per draw by σ_rel (stop 47)
+    away = s["diagnostics"]["fit"]["extrapolation_scale"]
+    assert away["scale"] == pytest.approx(post.extrapolation_scale, rel=1e-12)
+    assert away["p_above_limit"] == pytest.approx(post.p_misfit)
+    assert (f"bands of new measurements away from the recordings: model-error scale "
+            f"{post.extrapolation_scale:.2g} (the rms over the draws: 0.7 in the "
+            f"{100 * post.p_misfit:.0f}% whose relative model error is above the 2% limit"
+            in printed)
     assert main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--ci", "90"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ci 90" in err

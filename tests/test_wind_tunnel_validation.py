@@ -1,7 +1,8 @@
 """The wind-tunnel recordings on the collapsed core: leave-one-out, the criticality, the example.
 
-Leave-one-out refits all 7 folds at default settings (``fit_hybrid``, about 40 s
-a fold on 2 cores): those tests are marked ``slow`` and run with
+Leave-one-out refits all 7 folds at default settings and again with the model
+error away from the recordings at 0.1 (``fit_hybrid``, about 10 s a fold on 2
+cores): those tests are marked ``slow`` and run with
 ``pytest -m slow``; the stored notebook 03 holds the outputs of the same study.
 """
 
@@ -33,9 +34,35 @@ def loo(recordings):
     return leave_one_out(recordings, "subcritical", seed=0, progress=False)
 
 
+@pytest.fixture(scope="module")
+def loo_narrow(recordings):
+    """The same folds with the model error away from the recordings at 0.1 in every draw."""
+    from bayeshopf.inference.collapsed import CollapsedSettings
+
+    return leave_one_out(recordings, "subcritical", seed=0, progress=False,
+                         settings=CollapsedSettings(extrapolation_scale=0.1))
+
+
+#: The legacy core's mean held-out band (m), docs/inference_core.md.
+LEGACY_WIDTH = 0.0136
+
+
 @pytest.mark.slow
-def test_held_out_unstable_orbits_at_the_branch_ends_are_not_covered(loo):
-    """benchmarks/loo_collapsed_curved.json (seed 0, defaults): 4/7.
+def test_default_bands_hold_every_held_out_amplitude_at_four_times_the_legacy_width(loo):
+    """Each refit's draws whose relative model error is above 2% take the scale 0.7 away from
+    the recordings (stop 47): 7/7 inside at a mean width of 60.0 mm, 4.4 times the legacy
+    core's (at 0.1 in every draw: 4/7 at 14.8 mm, below)."""
+    assert loo.coverage("bayes") == 7, [(f.name, f.inside("bayes")) for f in loo.folds]
+    width = loo.summary()["bayes"]["mean_band_width"]
+    assert 3.5 * LEGACY_WIDTH < width < 5.5 * LEGACY_WIDTH, width
+    # every refit is above the limit in part of its draws (rms scales 0.48-0.68)
+    assert all(0.3 < f.extrapolation_scale < 0.7 for f in loo.folds), \
+        [f.extrapolation_scale for f in loo.folds]
+
+
+@pytest.mark.slow
+def test_at_scale_0_1_held_out_orbits_at_the_branch_ends_are_not_covered(loo_narrow):
+    """benchmarks/loo_collapsed_curved.json (seed 0, the scale 0.1 in every draw): 4/7.
 
     The unstable 14.9 and 16.5 m/s recordings are missed (without one of them
     the fold and the Hopf point move), and so, since the control term (stop
@@ -43,20 +70,24 @@ def test_held_out_unstable_orbits_at_the_branch_ends_are_not_covered(loo):
     stable 14.9–16.5 m/s ones are inside (P(X ≤ 4) = 0.026 for calibrated 90%
     bands).
     """
+    loo = loo_narrow
     inside = {f.name: f.inside("bayes") for f in loo.folds}
     assert all(v for k, v in inside.items() if "_stable_" in k and "17_3" not in k), inside
     assert not inside["CBC_unstable_v14_9.mat"] and not inside["CBC_unstable_v16_5.mat"], inside
     assert loo.coverage("bayes") >= 4, inside
+    assert loo.summary()["bayes"]["mean_band_width"] < 1.2 * LEGACY_WIDTH
     # the plug-in band has no parameter uncertainty: narrower than the posterior's
     s = loo.summary()
     assert s["map"]["mean_band_width"] < s["bayes"]["mean_band_width"], s
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="held-out unstable LCOs fall outside their bands "
-                   "(benchmarks/loo_collapsed_curved.json: 4/7 or 5/7)")
-def test_held_out_coverage_reaches_six_of_seven(loo):
-    assert loo.coverage("bayes") >= 6
+@pytest.mark.xfail(strict=True, reason="6/7 needs bands 4.4x the legacy width at the default "
+                   "scale; at 0.1, 4/7 (README, Limits)")
+def test_held_out_coverage_reaches_six_of_seven_within_twice_the_legacy_width(loo, loo_narrow):
+    assert any(x.coverage("bayes") >= 6
+               and x.summary()["bayes"]["mean_band_width"] <= 2 * LEGACY_WIDTH
+               for x in (loo, loo_narrow))
 
 
 @pytest.mark.slow

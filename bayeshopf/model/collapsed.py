@@ -155,8 +155,9 @@ EXTRAPOLATION_SCALE = 0.1
 #: residuals of the simulated rigs with missing physics that the check flags choose,
 #: pooled (``docs/inference_core.md``, "The class with missing physics").
 EXTRAPOLATION_SCALE_MISFIT = 0.7
-#: Relative model error σ_rel (posterior median) above which a fit misses the orbits'
-#: sizes: its prior scale, 2% of each coefficient.
+#: Relative model error σ_rel above which a fit misses the orbits' sizes: its prior scale,
+#: 2% of each coefficient (the fit's warning reads the posterior median, the scale away
+#: from the recordings each draw's value).
 SIGMA_REL_LIMIT = 0.02
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0

@@ -138,6 +138,18 @@ for h in history:
                 f"{o[0]:.3f} [{o[1]:.3f}, {o[2]:.3f}] | {o[2] - o[1]:.3f} |")
 display(Markdown("\\n".join(rows) + f"\\n\\nTruth: fold {truth.mu_fold:.4f} m/s, Hopf point {truth.mu0:.4f} m/s."))
 display(plot_diagram_vs_truth(fit, truth, title="after the campaign: posterior against the continuation"))"""),
+    new_markdown_cell("""**When the recommended orbit is not there.** Candidates are ranked by the current fit. When
+that fit's fold is off, the best candidate can lie below the true fold, where the orbit does not
+exist: the simulator raises, as CBC would find nothing. The attempt costs a recording and adds
+nothing, and the unchanged fit recommends the same point again; `next` does not learn from a failed
+attempt. In the stored run (seed 42, re-executed at stop 47) this happens after the sixth recording:
+its fold interval [14.265, 14.924] m/s ends just below the true 14.936 m/s, and the recommended
+14.87 m/s has no orbit on either branch. An experimenter would move to the next candidate above the
+failed μ (15.07 m/s in the table). The campaign stored at 656de2b added an unstable orbit at
+15.25 m/s at step 2 instead and found the fold; the fits have changed since then (the same
+campaign at the start of stop 47, before its changes, ran as stored here). The ten campaigns of
+`benchmarks/design.md` (seeds 100–109, an older code) lost no recording this way; seed 42 is
+a counterexample (README, Limits)."""),
     new_markdown_cell("""On the command line the same step is one call on a saved fit:
 
 ```bash
