@@ -122,8 +122,9 @@ class Fold:
         fit: The fold's :class:`~bayeshopf.posterior.HybridPosterior` (kept only when asked;
             both methods come from it).
         extrapolation_scale: The scale ``S`` of the model error away from the
-            recordings of this fold's refit (its own, by its relative model error,
-            unless set; 0 when off).
+            recordings of this fold's refit, its rms over the draws
+            (:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`: each
+            draw's by its relative model error unless set; 0 when off).
     """
 
     name: str
