@@ -148,8 +148,8 @@ its fold interval [14.265, 14.924] m/s ends just below the true 14.936 m/s, and 
 failed μ (15.07 m/s in the table). The campaign stored at 656de2b added an unstable orbit at
 15.25 m/s at step 2 instead and found the fold; the fits have changed since then (the same
 campaign at the start of stop 47, before its changes, ran as stored here). The ten campaigns of
-`benchmarks/design.md` (seeds 100–109, an older code) lost no recording this way; seed 42 is
-a counterexample (README, Limits)."""),
+`benchmarks/design_s47.md` (seeds 100–109, re-run on stop 47's code) lost no recording this way;
+seed 42 is a counterexample (README, Limits)."""),
     new_markdown_cell("""On the command line the same step is one call on a saved fit:
 
 ```bash
