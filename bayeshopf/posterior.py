@@ -75,7 +75,9 @@ def _common_over_mu(rng, shape) -> np.ndarray:
     return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
 
 
-def default_extrapolation_scale(sigma_rel) -> np.ndarray:
+def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCALE,
+                                misfit: float = cm.EXTRAPOLATION_SCALE_MISFIT,
+                                limit: float = cm.SIGMA_REL_LIMIT) -> np.ndarray:
     """The scale ``S`` of the model error away from the recordings, per posterior draw.
 
     ``S = 0.7`` in a draw whose relative model error σ_rel is above the 2% limit
@@ -94,9 +96,11 @@ def default_extrapolation_scale(sigma_rel) -> np.ndarray:
 
     Args:
         sigma_rel: Posterior draws of σ_rel.
+        base: The scale of a draw within the limit.
+        misfit: The scale of a draw above it.
+        limit: The limit of σ_rel (a saved fit passes its own three values).
     """
-    return np.where(np.asarray(sigma_rel, dtype=float) > cm.SIGMA_REL_LIMIT,
-                    cm.EXTRAPOLATION_SCALE_MISFIT, cm.EXTRAPOLATION_SCALE)
+    return np.where(np.asarray(sigma_rel, dtype=float) > limit, misfit, base)
 
 
 def rms_scale(scales) -> float:

@@ -404,8 +404,11 @@ class SavedHybrid:
             return np.full(n, float(e["scale"]))
         if "misfit_scale" not in e:
             return np.full(n, EXTRAPOLATION_SCALE)
-        above = np.asarray(s["sigma_rel"]) > e["sigma_rel_limit"]
-        return np.where(above, e["misfit_scale"], e["base_scale"])
+        from bayeshopf import posterior as bp
+
+        return bp.default_extrapolation_scale(s["sigma_rel"], base=e["base_scale"],
+                                              misfit=e["misfit_scale"],
+                                              limit=e["sigma_rel_limit"])
 
     def predict(self, mu: float, branch: str = "stable", predictive: bool = False,
                 ci: float = CI) -> Interval:

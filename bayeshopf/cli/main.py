@@ -271,9 +271,12 @@ def _print_diagnostics(summary: dict) -> None:
               f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
     away = diag["fit"].get("extrapolation_scale")
     if away:
+        from bayeshopf.model import collapsed as cm
+
         why = ("as set" if away["chosen_by"] == "setting" else
-               f"the rms over the draws: 0.7 in the {100 * away['p_above_limit']:.0f}% whose "
-               "relative model error is above the 2% limit, 0.1 in the others")
+               f"the rms over the draws: {cm.EXTRAPOLATION_SCALE_MISFIT:g} in the "
+               f"{100 * away['p_above_limit']:.0f}% whose relative model error is above the "
+               f"{100 * cm.SIGMA_REL_LIMIT:g}% limit, {cm.EXTRAPOLATION_SCALE:g} in the others")
         print(f"bands of new measurements away from the recordings: model-error scale "
               f"{away['scale']:.2g} ({why})")
     for w in diag.get("warnings", []):
