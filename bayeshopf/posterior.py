@@ -59,9 +59,10 @@ SIGMA_RATIO_MAX = 10.0
 #: ... when it is also above this fraction of the orbit scale ρ (a model error of
 #: 0.2% of the orbit is no misfit worth a warning, however clean the data).
 SIGMA_ORBIT_FRACTION = 0.01
-#: Relative model error σ_rel above which the fit is reported as missing the
-#: orbits' sizes (its prior scale: 2% of each coefficient).
-SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
+#: Relative model error above which the fit is reported as missing the orbits'
+#: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
+#: harmonic).
+SIGMA_REL_MAX = 0.02
 #: Draws used for bands (quantiles at 5%–95% are stable with 500).
 N_BAND_DRAWS = 500
 
@@ -73,34 +74,6 @@ def _common_over_mu(rng, shape) -> np.ndarray:
     is smooth (the frequency's predictive draws do the same, :func:`frequency_draws`).
     """
     return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
-
-
-def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCALE,
-                                misfit: float = cm.EXTRAPOLATION_SCALE_MISFIT,
-                                limit: float = cm.SIGMA_REL_LIMIT) -> np.ndarray:
-    """The scale ``S`` of the model error away from the recordings, per posterior draw.
-
-    ``S = 0.7`` in a draw whose relative model error σ_rel is above the 2% limit
-    and ``S = 0.1`` in the others
-    (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
-    :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
-    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
-    measurement's band averages over whether the fit misses the orbits' sizes.
-    A fit that misses them in-sample lacks physics, and its extrapolation may
-    err by more: on simulated rigs lacking one effect, the fits whose σ_rel
-    passes the check hold 110 of 112 held-out amplitudes at 0.1, and the
-    held-out residuals of those it flags choose 0.7 (``docs/inference_core.md``,
-    "The class with missing physics"). Per draw, not by the median: a fit of a
-    few recordings has a σ_rel near its prior, whose median lies close to the
-    limit, and its bands then widen in part, not all at once.
-
-    Args:
-        sigma_rel: Posterior draws of σ_rel.
-        base: The scale of a draw within the limit.
-        misfit: The scale of a draw above it.
-        limit: The limit of σ_rel (a saved fit passes its own three values).
-    """
-    return np.where(np.asarray(sigma_rel, dtype=float) > limit, misfit, base)
 
 
 def rms_scale(scales) -> float:
@@ -168,27 +141,24 @@ class HybridPosterior:
         """The scale ``S`` of the model error away from the recordings, per draw.
 
         For the draws :meth:`orbit_coefficients` uses with ``n_draws``:
-        ``settings.extrapolation_scale`` when it is set, otherwise chosen by each
-        draw's relative model error (:func:`default_extrapolation_scale`).
+        ``settings.extrapolation_scale`` when it is set (a user's override);
+        otherwise 0 for a model with the discrepancy, whose Gaussian process
+        already widens the bands away from the recordings, and
+        :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` for one without.
         """
         idx = self._draw_indices(n_draws)
         s = self.settings.extrapolation_scale
-        if s is not None:
-            return np.full(len(idx), float(s))
-        return default_extrapolation_scale(np.asarray(self.samples["sigma_rel"])[idx])
+        if s is None:
+            s = 0.0 if self.spec.has_discrepancy else cm.EXTRAPOLATION_SCALE
+        return np.full(len(idx), float(s))
 
     @property
     def extrapolation_scale(self) -> float:
         """The rms of :meth:`extrapolation_scales` over all draws (:func:`rms_scale`).
 
-        The setting when it is set; 0.1 when no draw's σ_rel is above the limit.
+        The setting when it is set (see :meth:`extrapolation_scales` otherwise).
         """
         return rms_scale(self.extrapolation_scales(None))
-
-    @property
-    def p_misfit(self) -> float:
-        """The posterior probability that the relative model error σ_rel is above its 2% limit."""
-        return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
         """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
@@ -204,14 +174,22 @@ class HybridPosterior:
                            control=None):
         """Harmonic coefficients of the predicted orbits in the frame, ``(n, n_mu, 2, 2K+1)``.
 
-        The model orbit at μ, projected on the K harmonics the data have
-        (``nan`` where the branch does not exist in a draw); with ``control``
+        The model orbit at μ, projected on the K harmonics the data have, plus,
+        with the model discrepancy, a draw of the discrepancy there
+        (:func:`discrepancy_draws`: the rig's orbit, not the normal form's
+        alone; ``nan`` where the branch does not exist in a draw); with ``control``
         ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
         that control, else the uncontrolled system's.
         """
         idx = self._draw_indices(n_draws)
-        return orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                                  self.run.betas[idx], mu, branch_sign(branch), control=control)
+        theta = {k: v[idx] for k, v in self.theta.items()}
+        c = orbit_coefficients(self.spec, theta, self.run.betas[idx], mu, branch_sign(branch),
+                               control=control)
+        if not self.spec.has_discrepancy:
+            return c
+        delta, _ = discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features, mu,
+                                     branch_sign(branch), self.seed)
+        return c + delta
 
     def recording_control(self, i: int):
         """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""
@@ -219,12 +197,25 @@ class HybridPosterior:
             return None
         return np.asarray(self.features.control)[i][None]
 
-    def _noise_sd(self, coeffs, coeffs_se=None):
-        """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``."""
+    def _noise_sd(self, coeffs, coeffs_se=None, mu=None, branch: str = "stable"):
+        """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``.
+
+        With the discrepancy, its independent part ``σ_rel g`` at ``mu`` (the
+        μ of ``coeffs``' second axis, or of a training recording for ``coeffs``
+        of one μ) replaces ``σ_rel c``.
+        """
         idx = self._draw_indices(N_BAND_DRAWS)
         se = np.median(self.features.coeffs_se, axis=0) if coeffs_se is None else coeffs_se
-        return noise_sd(coeffs, np.asarray(self.samples["sigma"])[idx],
-                        np.asarray(self.samples["sigma_rel"])[idx], se)
+        sigma = np.asarray(self.samples["sigma"])[idx]
+        if not self.spec.has_discrepancy:
+            return noise_sd(coeffs, sigma, np.asarray(self.samples["sigma_rel"])[idx], se)
+        theta = {k: v[idx] for k, v in self.theta.items()}
+        _, nugget = discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features,
+                                      np.atleast_1d(mu), branch_sign(branch), self.seed)
+        nugget = nugget.reshape(np.shape(coeffs))
+        extra = (1,) * (np.ndim(coeffs) - 3)
+        s2 = sigma.reshape((-1,) + extra + (2, 1)) ** 2
+        return np.sqrt(np.asarray(se) ** 2 + s2 + nugget)
 
     def orbits(self, mu: float, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
                control=None):
@@ -256,7 +247,7 @@ class HybridPosterior:
         if predictive:
             c = self._away_from_data(c, mu, branch)
             rng = np.random.default_rng(self.seed)
-            c = c + self._noise_sd(c, coeffs_se) * _common_over_mu(rng, c.shape)
+            c = c + self._noise_sd(c, coeffs_se, mu, branch) * _common_over_mu(rng, c.shape)
         return self._amplitude_of(c)
 
     def _away_from_data(self, coeffs, mu, branch: str) -> np.ndarray:
@@ -287,7 +278,7 @@ class HybridPosterior:
         spec = self.spec
         if spec.control_scale is None:
             return None
-        h = np.asarray(self.run.betas)[:, spec.n_map:, 1]                   # (n, 2): w2's
+        h = np.asarray(self.run.betas)[:, spec.n_map:spec.n_basis, 1]                   # (n, 2): w2's
         gain = {part: interval(h[:, j], ci).to_json() for j, part in enumerate(("re", "im"))}
         u = np.asarray(self.features.control)                               # (n_rec, 2)
         resp = np.abs((h[:, :1] + 1j * h[:, 1:]) * (u[:, 0] - 1j * u[:, 1])[None])
@@ -414,7 +405,8 @@ class HybridPosterior:
         amp = self._amplitude_of(c)
         rng = np.random.default_rng(self.seed)
         ce = self._away_from_data(c, mu, branch)
-        amp_p = self._amplitude_of(ce + self._noise_sd(ce) * _common_over_mu(rng, c.shape))
+        amp_p = self._amplitude_of(ce + self._noise_sd(ce, None, mu, branch)
+                                   * _common_over_mu(rng, c.shape))
         q, p = quantiles(amp, at)
         qp, _ = quantiles(amp_p, at)
         to_hopf = p_to_hopf = None
@@ -473,7 +465,9 @@ class HybridPosterior:
         reps = []
         rng = np.random.default_rng(self.seed)
         for i, c in enumerate(self.training_coefficients):
-            rep = c + self._noise_sd(c, f.coeffs_se[i]) * rng.standard_normal(c.shape)
+            rep = c + self._noise_sd(c, f.coeffs_se[i], [f.mu[i]],
+                                     "unstable" if f.unstable[i] else "stable"
+                                     ) * rng.standard_normal(c.shape)
             reps.append(rep)
             a, ap = self._amplitude_of(c), self._amplitude_of(rep)
             curve.append(interval(a, ci))
@@ -678,7 +672,7 @@ def _orbit_program(spec: cm.CollapsedSpec):
     """``(θ, β, μ per draw, sign) ↦ coefficients`` (to be compiled; lax.map over draws)."""
     def one(a, sign):     # Φ(μ) β: the design of the likelihood, at every μ of the grid
         t, b, mu = a
-        return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b)
+        return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b[:spec.n_basis])
 
     # one draw's network features (μ × phase × unit) in memory at a time
     return lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu))
@@ -718,7 +712,8 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     if control is None or spec.control_scale is None:
         return c
     cols = np.asarray(cm.control_columns(spec, np.asarray(control, float)))  # (n_mu, 2K+1, 2)
-    return c + np.einsum("mkj,njc->nmck", cols, np.asarray(betas)[:, spec.n_map:, :])
+    return c + np.einsum("mkj,njc->nmck", cols,
+                         np.asarray(betas)[:, spec.n_map:spec.n_basis, :])
 
 
 def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float, *,
@@ -765,6 +760,51 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
     z = rng.standard_normal(n)
     c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
     return np.exp((s * z)[:, None] * c[None])
+
+
+def _discrepancy_program(spec: cm.CollapsedSpec):
+    """``(θ, β, training μ and signs, μ, sign) ↦ (mean, var, nugget)`` of ``Δ`` per draw."""
+    from bayeshopf.model import discrepancy as dm
+
+    def one(a, mu_ref, sign_ref, mu, sign):
+        t, b = a
+        g_ref, x_ref = cm.discrepancy_geometry(spec, t, mu_ref, sign_ref, mu_ref, sign_ref)
+        g, x = cm.discrepancy_geometry(spec, t, mu, sign * jnp.ones_like(mu), mu_ref, sign_ref)
+        z = b[spec.n_basis:]                                          # (n_ref S, 2)
+        pairs = [dm.conditional(z[:, c], g[:, c], x_ref, x, t["eta"], t["ell"]) for c in range(2)]
+        mean = jnp.stack([p[0] for p in pairs], axis=1)               # (n_mu, 2, M)
+        var = jnp.stack([p[1] for p in pairs], axis=1)
+        return mean, var, (t["sigma_rel"] * g) ** 2
+
+    return lambda th, b, mu_ref, sign_ref, mu, sign: jax.lax.map(
+        lambda a: one(a, mu_ref, sign_ref, mu, sign), (th, b))
+
+
+def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
+                      mu, sign: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Draws of the model discrepancy ``Δ`` at μ, and its independent variance there.
+
+    Per posterior draw ``(θ, β, z)`` (``z`` the last rows of ``β``), the smooth
+    part's Gaussian-process conditional at μ on ``sign``'s branch
+    (:func:`~bayeshopf.model.discrepancy.conditional`), drawn with one set of
+    standard normals per draw for every μ (smooth bands, exact marginals), and
+    ``(σ_rel g)²``, the variance of a new recording's own relative error.
+
+    Returns:
+        ``(delta, nugget_var)``, each ``(n, n_mu, 2, 2K+1)``; ``nan`` where a draw
+        has no orbit on the branch.
+    """
+    ensure_x64()
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    ref_sign = np.where(features.unstable, -1.0, 1.0)
+    mean, var, nugget = (np.asarray(a) for a in compiled_call(
+        "discrepancy", lambda: _discrepancy_program(spec),
+        (th, jnp.asarray(betas), jnp.asarray(features.mu), jnp.asarray(ref_sign),
+         jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+    rng = np.random.default_rng([seed, 3])
+    eps = _common_over_mu(rng, mean.shape)
+    return mean + np.sqrt(var) * eps, nugget
 
 
 def scale_orbits(coeffs, factor) -> np.ndarray:
@@ -911,14 +951,16 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
         "sigma_over_orbit_scale": (sigma / post.spec.orbit_scale).tolist(),
         "sigma_rel": float(np.median(post.samples["sigma_rel"])),
     }
-    if post.settings.extrapolation:
-        d["fit"]["extrapolation_scale"] = {
-            "scale": post.extrapolation_scale,
-            "chosen_by": ("setting" if post.settings.extrapolation_scale is not None
-                          else "relative model error"),
-            "p_above_limit": post.p_misfit,
-            "sigma_rel_ci90": [float(q) for q in np.quantile(
-                np.asarray(post.samples["sigma_rel"]), [0.5 - CI / 2, 0.5 + CI / 2])]}
+    if post.spec.has_discrepancy:
+        total = np.hypot(np.asarray(post.samples["eta"]), np.asarray(post.samples["sigma_rel"]))
+        d["fit"]["discrepancy"] = {
+            "eta": post.interval("eta").to_json(), "ell": post.interval("ell").to_json(),
+            "sigma_rel": post.interval("sigma_rel").to_json(),
+            "relative": interval(total).to_json()}
+        d["fit"]["sigma_rel"] = float(np.median(total))
+    if post.settings.extrapolation and post.settings.extrapolation_scale is not None:
+        d["fit"]["extrapolation_scale"] = {"scale": post.extrapolation_scale,
+                                           "chosen_by": "setting"}
     for e in errs:
         if not e["ok"]:
             rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
@@ -946,17 +988,14 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
                                 "outside its 90% predictive band")
     rel = d["fit"]["sigma_rel"]
     if rel > SIGMA_REL_MAX:
-        warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
-                        f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
-                        "fraction, and the predictive bands are that wide for that reason; "
-                        + (f"bands of new measurements away from the recordings use the "
-                           f"wider model-error scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such "
-                           f"fits in the {100 * post.p_misfit:.0f}% of the draws above the "
-                           "limit, and may still be too narrow"
-                           if post.settings.extrapolation_scale is None else
-                           "bands of new measurements away from the recordings are not "
-                           "calibrated for such a fit")
-                        + " (check them with fit --leave-one-out)")
+        warnings.append(
+            f"fit: relative model error {100 * rel:.1f}% (limit {100 * SIGMA_REL_MAX:.0f}%): "
+            "the model misses the orbits by that fraction; "
+            + ("the model discrepancy carries it into the Hopf and fold intervals and the "
+               "bands" if post.spec.has_discrepancy else
+               "bands of new measurements away from the recordings are not calibrated for "
+               "such a fit")
+            + " (check them with fit --leave-one-out)")
     d["warnings"] = warnings
     return d
 
@@ -993,7 +1032,8 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     t0 = time.perf_counter()
     spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
                          unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
-                         frequency=settings.frequency, control=settings.control)
+                         frequency=settings.frequency, control=settings.control,
+                         discrepancy=settings.discrepancy)
     kwargs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

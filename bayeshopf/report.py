@@ -43,12 +43,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.diagnostics import arviz_io
 from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import DataError, OutputError
-from bayeshopf.model.collapsed import (
-    EXTRAPOLATION_SCALE,
-    EXTRAPOLATION_SCALE_MISFIT,
-    SIGMA_REL_LIMIT,
-    CollapsedSpec,
-)
+from bayeshopf.model.collapsed import CollapsedSpec
 
 SUMMARY = "summary.json"
 POSTERIOR = "posterior.nc"
@@ -286,9 +281,7 @@ def _extrapolation_data(post) -> dict | None:
         return None
     f = post.features
     return {"mu_stable": f.mu[~f.unstable].tolist(), "mu_unstable": f.mu[f.unstable].tolist(),
-            "scale": post.settings.extrapolation_scale,
-            "base_scale": EXTRAPOLATION_SCALE, "misfit_scale": EXTRAPOLATION_SCALE_MISFIT,
-            "sigma_rel_limit": SIGMA_REL_LIMIT}
+            "scale": post.settings.extrapolation_scale}
 
 
 @dataclass(frozen=True)
@@ -375,40 +368,27 @@ class SavedHybrid:
         return interval(f, ci) if f.size else None
 
     def _draws(self, mu: float, branch: str, predictive: bool) -> np.ndarray:
+        """Amplitude draws at μ: the rebuilt fit's own prediction (one path for every command).
+
+        A folder without the saved features (an older bayeshopf) predicts from
+        the draws alone, without the model error away from the recordings.
+        """
         from bayeshopf import posterior as bp
 
-        idx = bp.draw_indices(len(self.samples["beta"]))   # the draws the summary used
+        if self.spec.has_discrepancy or self.extrapolation is not None:
+            try:
+                return self.posterior.amplitude([mu], branch, predictive=predictive)[:, 0]
+            except DataError:
+                pass
+        idx = bp.draw_indices(len(self.samples["beta"]))
         s = {k: v[idx] for k, v in self.samples.items()}
         theta = {k: v for k, v in s.items() if k not in ("beta", "gamma")}
         c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp.branch_sign(branch))
         if predictive:
-            if self.extrapolation is not None:
-                c = bp.scale_orbits(c, bp.extrapolation_factor(
-                    [mu], self.extrapolation[f"mu_{branch}"], self.spec.mu_span, c.shape[0],
-                    int(self.summary.get("seed", 0)), scale=self._extrapolation_scales(s)))
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
             sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
             c = c + sd * rng.standard_normal(c.shape)
         return bp.amplitude_of(self.spec, c)[:, 0]
-
-    def _extrapolation_scales(self, s: dict) -> np.ndarray:
-        """The scale of the model error away from the recordings per draw of ``s``.
-
-        The saved setting, or 0.7 where σ_rel is above its limit and 0.1 elsewhere
-        (:func:`~bayeshopf.posterior.default_extrapolation_scale`); a folder of an
-        older version saved one scale for all draws.
-        """
-        e = self.extrapolation
-        n = len(s["sigma_rel"])
-        if e.get("scale") is not None:
-            return np.full(n, float(e["scale"]))
-        if "misfit_scale" not in e:
-            return np.full(n, EXTRAPOLATION_SCALE)
-        from bayeshopf import posterior as bp
-
-        return bp.default_extrapolation_scale(s["sigma_rel"], base=e["base_scale"],
-                                              misfit=e["misfit_scale"],
-                                              limit=e["sigma_rel_limit"])
 
     def predict(self, mu: float, branch: str = "stable", predictive: bool = False,
                 ci: float = CI) -> Interval:

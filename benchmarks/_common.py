@@ -7,6 +7,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+#: Where runs that no document quotes go (per-label, per-setting copies); ignored by git.
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+
 #: The authors' 7 CBC recordings (never committed; ../shared beside the repository).
 CBC_DIR = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" /
            "flutter_cbc").resolve()

@@ -1,6 +1,7 @@
 """Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
 
-Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters] [--label L]``
+Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters] [--label L]
+[--out FILE]``
 on an otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
 (``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
 cache the cold run filled. Prints a Markdown table and writes
@@ -9,7 +10,9 @@ and the machine's CPU count and load before each run. ``--fusion-emitters`` runs
 with XLA's CPU fusion emitters, which ``inference.cache.configure_xla_cpu`` turns
 off by default (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true``), and writes
 ``benchmarks/cli_speed_fusion_emitters.json``. ``--label L`` writes
-``benchmarks/cli_speed_L.json`` instead: with ``PYTHONPATH`` naming a checkout of
+``benchmarks/results/cli_speed_L.json`` instead (an ignored folder: labelled rounds
+are per-run copies; ``--out FILE`` names the file, e.g. one that a document
+quotes): with ``PYTHONPATH`` naming a checkout of
 another commit (``git worktree add``), the CLI runs that commit's code, so two
 versions can be timed in turns on the same machine (``BAYESHOPF_EXE`` names the
 console script to run, where that commit's entry point is not the installed one).
@@ -22,6 +25,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _common import RESULTS_DIR
 
 HERE = Path(__file__).parent
 RIG = HERE.parent.parent / "shared/data/flutter_cbc"
@@ -44,7 +49,7 @@ def timed(args, cache, xla_flags):
             "stages_s": summary.get("timings_s", {})}
 
 
-def main(repeat=1, fusion_emitters=False, label=None):
+def main(repeat=1, fusion_emitters=False, label=None, out=None):
     flags = os.environ.get("XLA_FLAGS", "")
     if fusion_emitters:
         flags = f"{flags} --xla_cpu_use_fusion_emitters=true".strip()
@@ -55,9 +60,11 @@ def main(repeat=1, fusion_emitters=False, label=None):
         rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache, flags)})
         rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()), flags)})
     name = "cli_speed_fusion_emitters" if fusion_emitters else "cli_speed"
-    name = f"cli_speed_{label}" if label else name
+    path = RESULTS_DIR / f"cli_speed_{label}.json" if label else HERE / f"{name}.json"
+    path = Path(out) if out else path
+    path.parent.mkdir(parents=True, exist_ok=True)
     code = os.environ.get("PYTHONPATH") or str(HERE.parent)
-    (HERE / f"{name}.json").write_text(json.dumps(
+    path.write_text(json.dumps(
         {"cpu_count": os.cpu_count(), "xla_flags": flags, "code": code, "runs": rows}, indent=1))
     print("| case | wall (s) | load before | stages (s) |\n|---|---:|---:|---|")
     for r in rows:
@@ -68,4 +75,5 @@ def main(repeat=1, fusion_emitters=False, label=None):
 if __name__ == "__main__":
     main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
          fusion_emitters="--fusion-emitters" in sys.argv,
-         label=sys.argv[sys.argv.index("--label") + 1] if "--label" in sys.argv else None)
+         label=sys.argv[sys.argv.index("--label") + 1] if "--label" in sys.argv else None,
+         out=sys.argv[sys.argv.index("--out") + 1] if "--out" in sys.argv else None)

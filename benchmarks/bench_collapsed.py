@@ -1,7 +1,7 @@
 """The collapsed core on the demo (3-DOF aerofoil) and the rig: timings, NUTS against SVI, fit.
 
 Run: ``python benchmarks/bench_collapsed.py [rig|demo|both]``. Writes
-``benchmarks/collapsed.json`` and prints a Markdown table. Each case: one cold
+``benchmarks/collapsed_<case>.json`` and prints a Markdown table. Each case: one cold
 ``bayeshopf fit``-equivalent run in a fresh process is timed by the caller
 (``time bayeshopf fit ...``); here the stages are timed in-process, NUTS (the
 default posterior) and SVI are both run from the same MAP point, and their 90%

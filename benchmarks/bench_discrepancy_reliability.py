@@ -42,7 +42,8 @@ Usage (one core; the study uses seeds 1000 upward, seeds 0–4 are for trials)::
     .venv/bin/python benchmarks/bench_discrepancy_reliability.py --seeds 1000:1045 --draws
 
 ``--seeds A:B`` runs seeds A … B−1 (also ``A`` or ``A,B,C``) in this process and
-writes the JSON (default ``benchmarks/discrepancy_reliability.json``) atomically
+writes the JSON (default ``benchmarks/results/discrepancy_reliability.json``, an
+ignored folder; the study's files are named with ``--out``) atomically
 after every set; sets of other seeds already in it are kept, and with
 ``--resume`` the seeds already there are not rerun. ``--table FILE ...`` merges
 the JSON files (default the ``--out`` file; a seed in several files: the last
@@ -73,7 +74,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import independent_effects as ie  # noqa: E402
-from _common import atomic_write  # noqa: E402
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 from bayeshopf.errors import BayesHopfError  # noqa: E402
 
@@ -145,7 +146,7 @@ IE_NEAREST = {
 BINS = ((1 / 3, 0.5), (0.5, 0.7), (0.7, 0.9), (0.9, 0.99), (0.99, 1.0))
 #: Largest |stated − observed| accepted in a bin that holds at least MIN_BIN sets.
 TOLERANCE, MIN_BIN = 0.15, 5
-DEFAULT_OUT = HERE / "discrepancy_reliability.json"
+DEFAULT_OUT = RESULTS_DIR / "discrepancy_reliability.json"
 DEFAULT_MD = HERE / "discrepancy_reliability.md"
 
 
@@ -686,7 +687,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", help="A:B (seeds A … B-1), A, or A,B,C")
-    ap.add_argument("--out", type=Path, help=f"JSON file (default {DEFAULT_OUT.name})")
+    ap.add_argument("--out", type=Path,
+                    help="JSON file (default benchmarks/results/discrepancy_reliability.json)")
     ap.add_argument("--resume", action="store_true",
                     help="do not rerun seeds already in the JSON")
     ap.add_argument("--table", nargs="*", type=Path, metavar="JSON",

@@ -51,11 +51,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
     p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
-                   help="half-normal scale of the model error away from the recordings, in "
-                   "log orbit size (default: per posterior draw 0.1, or 0.7 where the fit's "
-                   "relative model error is above 2%%): it widens new measurements' bands "
-                   "between and beyond the recordings only; set it from other rigs' "
-                   "leave-one-out")
+                   help="an extra model error away from the recordings on top of the model "
+                   "discrepancy: its half-normal scale in log orbit size (default none: the "
+                   "discrepancy, learned with the fit, widens the bands there); it widens new "
+                   "measurements' bands between and beyond the recordings only")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -269,16 +268,16 @@ def _print_diagnostics(summary: dict) -> None:
     if errs:
         print(f"orbit errors (posterior-median orbit against the measured mean orbit): "
               f"{100 * min(errs):.1f}–{100 * max(errs):.1f}% of the orbit size")
+    disc = diag["fit"].get("discrepancy")
+    if disc:
+        eta = disc["eta"]
+        print(f"model discrepancy (smooth, of the fundamental): {100 * eta['median']:.2g}% "
+              f"[{100 * eta['lo']:.2g}, {100 * eta['hi']:.2g}] of the orbit size; it is in "
+              "the posterior, so the intervals and bands include it")
     away = diag["fit"].get("extrapolation_scale")
     if away:
-        from bayeshopf.model import collapsed as cm
-
-        why = ("as set" if away["chosen_by"] == "setting" else
-               f"the rms over the draws: {cm.EXTRAPOLATION_SCALE_MISFIT:g} in the "
-               f"{100 * away['p_above_limit']:.0f}% whose relative model error is above the "
-               f"{100 * cm.SIGMA_REL_LIMIT:g}% limit, {cm.EXTRAPOLATION_SCALE:g} in the others")
-        print(f"bands of new measurements away from the recordings: model-error scale "
-              f"{away['scale']:.2g} ({why})")
+        print(f"bands of new measurements away from the recordings: extra model-error scale "
+              f"{away['scale']:.2g} (as set)")
     for w in diag.get("warnings", []):
         print(f"warning: {w}")
 
@@ -311,9 +310,9 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
                        "(e.g. 0.9)")
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
-                       "default per draw 0.1, or 0.7 where the relative model error is above "
-                       "2%)")
+        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (an "
+                       "extra model error away from the recordings, in log orbit size, on top "
+                       "of the model discrepancy; by default none)")
     report.check_output_folder(out, args.force)
     worker = None
     if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process

@@ -54,6 +54,7 @@ from bayeshopf.inference.cache import (
     stored_shapes,
 )
 from bayeshopf.model import collapsed as cm
+from bayeshopf.model import discrepancy as dm
 
 #: Gradient norm (unconstrained space) below which the MAP counts as converged.
 MAP_GTOL = 1e-4
@@ -100,18 +101,20 @@ class CollapsedSettings:
         extrapolation: Whether a new measurement's band includes the model error
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
-        extrapolation_scale: Half-normal scale ``S`` of that error's amplitude,
-            ``s_e ~ HalfNormal(S)``, in log orbit size. ``None`` (the default) lets
-            each posterior draw choose by its relative model error σ_rel:
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7) where
-            σ_rel is above :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT` (2%),
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1) otherwise
-            (:func:`~bayeshopf.posterior.default_extrapolation_scale`).
-            It changes the bands of new measurements only; set it from other rigs'
-            leave-one-out, not from the recordings being validated.
+        extrapolation_scale: ``None`` (the default): no extra model error away
+            from the recordings beyond the model discrepancy (a fit without
+            the discrepancy takes :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`);
+            a number: the half-normal scale ``S`` of an extra error
+            ``s_e ~ HalfNormal(S)`` in log orbit size, a user's override that
+            changes the bands of new measurements only.
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").
+        discrepancy: Whether the model includes the model discrepancy, a
+            Gaussian process along the branch on the orbits' harmonics whose
+            scale and length are sampled with the normal form
+            (:mod:`bayeshopf.model.discrepancy`). Off, the model is the one
+            without it (a relative model error ``σ_rel y`` instead).
     """
 
     n_harmonics: int = 4
@@ -134,16 +137,16 @@ class CollapsedSettings:
     extrapolation: bool = True
     control: bool = True
     extrapolation_scale: float | None = None
+    discrepancy: bool = True
 
     def __post_init__(self):
         s = self.extrapolation_scale
         if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
                               or not math.isfinite(s) or s <= 0):
             raise FitError("extrapolation_scale: a positive number or None expected (the "
-                           "half-normal scale of the model error away from the recordings, "
-                           f"in log orbit size; None: {cm.EXTRAPOLATION_SCALE} or "
-                           f"{cm.EXTRAPOLATION_SCALE_MISFIT} by the fit's relative model "
-                           f"error); got {s!r}")
+                           "half-normal scale of an extra model error away from the "
+                           "recordings, in log orbit size; None: none beyond the model "
+                           f"discrepancy); got {s!r}")
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
@@ -155,12 +158,14 @@ class CollapsedSettings:
 def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
                unfolding: str = "curved", mu_label: str = "mu",
                mu_units: str = "", frequency: bool = True,
-               control: bool = True) -> cm.CollapsedSpec:
+               control: bool = True, discrepancy: bool = True) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
 
     The control term is on when ``control`` is true and the features hold a
     control channel whose fundamental is not zero throughout; its prior sd is
-    ``CONTROL_SCALE · ρ / ū`` (``ū`` the RMS of ``|U_i|``).
+    ``CONTROL_SCALE · ρ / ū`` (``ū`` the RMS of ``|U_i|``). With ``discrepancy``
+    the model includes the discrepancy Gaussian process, its coefficient
+    scales ``q`` read off the features (:mod:`bayeshopf.model.discrepancy`).
 
     Raises:
         FitError: For fewer than two distinct μ, an unknown criticality or
@@ -196,6 +201,8 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         unfolding=unfolding if criticality == "subcritical" else "linear",
         omega_centre=float(np.mean(features.omega)) if frequency else None,
         control_scale=control_scale,
+        discrepancy_scale=(tuple(map(tuple, dm.coefficient_scale(features.coeffs).tolist()))
+                           if discrepancy else None),
     )
 
 
@@ -233,6 +240,9 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
          "gap_hopf": 0.3 * spec.mu_span}
     if spec.omega_centre is not None:
         v["sigma_omega"] = 0.5 * cm.SIGMA_OMEGA_PRIOR * spec.omega_centre
+    if spec.has_discrepancy:
+        v["eta"] = 0.5 * dm.ETA_PRIOR
+        v["ell"] = dm.LENGTH_PRIOR[0]
     if spec.criticality == "subcritical":
         v["gap_fold"] = 0.3 * spec.mu_span
         if spec.unfolding == "curved":

@@ -91,27 +91,31 @@ as well would move the time origin and the size themselves; on the rig the
 data do not determine it (``docs/validation.md``). Predictions at a new μ, the
 diagram and its branches are the uncontrolled system's (``U = 0``).
 
-**Model error away from the recordings** (predictions only). A new recording at
-μ on branch ``b`` has its orbit about its centre scaled by ``e^{δ_b(μ)}``, with
-``δ_b`` a squared-exponential Gaussian process in μ conditioned on ``δ_b = 0``
-at that branch's training recordings (the fit there is what the likelihood
-says it is):
+**Model discrepancy** (:mod:`bayeshopf.model.discrepancy`). The recorded
+coefficients are the model's plus a discrepancy ``Δ``, a Gaussian process over
+the diagram on the orbit's fundamental (smooth, scale ``η``, length ``ℓ``) and
+on every harmonic (independent, ``σ_rel``), both relative to the model's own
+orbit size. Its smooth part is a few more linear columns of ``Φ`` (one latent
+per recording and fundamental coefficient, :func:`linear_system`), integrated
+out with the map; its independent part replaces ``σ_rel y`` in ``D``. ``η``
+and ``ℓ`` are sampled with the normal form, so the Hopf and fold intervals
+widen when the recordings disagree with the model, and predictions at a new μ
+take the discrepancy's conditional there (``posterior.discrepancy_draws``).
+With ``spec.discrepancy_scale = None`` the model is the one without it
+(``D = diag(se² + σ_c² + (σ_rel y)²)``).
+
+**Extra model error away from the recordings** (predictions only, a user's
+override). A new recording at μ on branch ``b`` may have its orbit about its
+centre scaled by ``e^{δ_b(μ)}``, with ``δ_b`` a squared-exponential Gaussian
+process in μ conditioned on ``δ_b = 0`` at that branch's training recordings,
 
 .. math::  δ_b(μ) \sim N\big(0, s_e^2\,c_b(μ)^2\big),\quad
            c_b(μ)^2 = 1 - k_*^T K^{-1} k_*,\quad
            k(μ, μ') = e^{-(μ-μ')^2 / 2ℓ^2},
 
-``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``. ``S`` is
-:data:`EXTRAPOLATION_SCALE` (fixed before any rig run, for the radius
-discrepancy tried in the likelihood) in a posterior draw whose relative model
-error σ_rel is within :data:`SIGMA_REL_LIMIT`, and :data:`EXTRAPOLATION_SCALE_MISFIT`
-in one where it is above: on simulated rigs
-lacking one piece of physics, the passing fits' held-out amplitudes lie in
-their bands at the first scale and the flagged fits' need the second
-(``docs/inference_core.md``). It is zero at every training recording, so it
-changes neither the posterior nor the training checks; it widens the band of a
-new measurement between and beyond the recordings, where the normal form's fit
-is an inter- or extrapolation.
+``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``, with ``S``
+the setting ``extrapolation_scale`` (none by default; a fit without the
+discrepancy takes :data:`EXTRAPOLATION_SCALE`).
 """
 
 from __future__ import annotations
@@ -125,6 +129,7 @@ import numpyro
 import numpyro.distributions as dist
 
 from bayeshopf.features.frame import PlanarFrame
+from bayeshopf.model import discrepancy as dm
 from bayeshopf.model import normal_form
 
 #: Prior scale of the linear gains ``T_L[:, :2]`` relative to ρ (broad).
@@ -147,18 +152,9 @@ SIGMA_OMEGA_PRIOR = 0.01
 #: Terms ``(r̃²)^i μ̃^j`` of the phase speed ``Ω(r, μ) − ω̄``, as ``(i, j)``: the
 #: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
 FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
-#: Half-normal scale of the model error away from the recordings, ``s_e`` (log orbit size),
-#: of a fit whose relative model error σ_rel passes its check (:data:`SIGMA_REL_LIMIT`).
+#: Half-normal scale of the extra model error away from the recordings, ``s_e`` (log
+#: orbit size), of a fit without the model discrepancy (module docstring).
 EXTRAPOLATION_SCALE = 0.1
-#: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
-#: (``posterior.default_extrapolation_scale``): the scale the held-out
-#: residuals of the simulated rigs with missing physics that the check flags choose,
-#: pooled (``docs/inference_core.md``, "The class with missing physics").
-EXTRAPOLATION_SCALE_MISFIT = 0.7
-#: Relative model error σ_rel above which a fit misses the orbits' sizes: its prior scale,
-#: 2% of each coefficient (the fit's warning reads the posterior median, the scale away
-#: from the recordings each draw's value).
-SIGMA_REL_LIMIT = 0.02
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0
 #: Prior sd of the control's complex gain ``H`` in units of ``ρ / ū`` (module docstring).
@@ -191,6 +187,10 @@ class CollapsedSpec:
         control_scale: Prior sd of the control's gain ``h`` (frame units per
             unit of the control channel), or ``None`` for a model without the
             control term (module docstring, "Control").
+        discrepancy_scale: ``q_{c,h}`` ``(2, 2K+1)`` of the model discrepancy
+            (:mod:`bayeshopf.model.discrepancy`), or ``None`` for a model
+            without it (then the relative model error is ``σ_rel y``, the
+            model of fits saved before the discrepancy existed).
     """
 
     criticality: str
@@ -207,6 +207,12 @@ class CollapsedSpec:
     unfolding: str = "curved"
     omega_centre: float | None = None
     control_scale: float | None = None
+    discrepancy_scale: tuple | None = None
+
+    @property
+    def has_discrepancy(self) -> bool:
+        """Whether the model includes the discrepancy Gaussian process."""
+        return self.discrepancy_scale is not None
 
     def mu_tilde(self, mu):
         """``μ̃ = (μ − μ_c)/Δμ``."""
@@ -236,6 +242,9 @@ class CollapsedSpec:
         d = dict(d)
         d["frame"] = PlanarFrame.from_dict(d["frame"])
         d["nn_hidden"] = tuple(np.asarray(a) for a in d["nn_hidden"])
+        if d.get("discrepancy_scale") is not None:
+            d["discrepancy_scale"] = tuple(tuple(float(v) for v in row)
+                                           for row in d["discrepancy_scale"])
         return cls(**d)
 
 
@@ -558,11 +567,9 @@ def pointwise_log_likelihood(spec: CollapsedSpec, theta: dict, mu, sign, coeffs,
         Shape ``(n_rec,)``.
     """
     n = mu.shape[0]
-    Phis = channel_designs(spec, mu, sign, theta, control)
-    sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
-    var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
-    total = sum(block_log_predictive(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1),
-                                     sd, n) for c in range(2))
+    Phis, sd, ds = linear_system(spec, theta, mu, sign, coeffs, coeffs_se, control)
+    total = sum(block_log_predictive(Phis[c], coeffs[:, c].reshape(-1), ds[c], sd, n)
+                for c in range(2))
     if spec.omega_centre is not None and omega is not None:
         total = total + block_log_predictive(
             frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
@@ -602,15 +609,25 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
     return theta
 
 
-def hyper_sites(spec: CollapsedSpec):
-    """``τ_μ``, ``τ_s``, the model error ``σ_c`` of each channel and the relative one ``σ_rel``."""
-    tau_mu = numpyro.sample("tau_mu", dist.LogNormal(np.log(TAU_MU_PRIOR[0]), TAU_MU_PRIOR[1]))
-    tau_shape = numpyro.sample(
-        "tau_shape", dist.LogNormal(np.log(TAU_SHAPE_PRIOR[0]), TAU_SHAPE_PRIOR[1]))
-    sigma = numpyro.sample(
-        "sigma", dist.HalfNormal(SIGMA_PRIOR * spec.orbit_scale).expand([2]).to_event(1))
-    sigma_rel = numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))
-    return tau_mu, tau_shape, sigma, sigma_rel
+def hyper_sites(spec: CollapsedSpec) -> dict:
+    """``τ_μ``, ``τ_s``, the model error ``σ_c`` of each channel, the relative one ``σ_rel``.
+
+    With the discrepancy (``spec.has_discrepancy``) also its scale ``η`` and
+    length ``ℓ`` (:mod:`bayeshopf.model.discrepancy`); ``σ_rel`` is then its
+    part independent between recordings.
+    """
+    h = {"tau_mu": numpyro.sample(
+            "tau_mu", dist.LogNormal(np.log(TAU_MU_PRIOR[0]), TAU_MU_PRIOR[1])),
+         "tau_shape": numpyro.sample(
+            "tau_shape", dist.LogNormal(np.log(TAU_SHAPE_PRIOR[0]), TAU_SHAPE_PRIOR[1])),
+         "sigma": numpyro.sample(
+            "sigma", dist.HalfNormal(SIGMA_PRIOR * spec.orbit_scale).expand([2]).to_event(1)),
+         "sigma_rel": numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))}
+    if spec.has_discrepancy:
+        h["eta"] = numpyro.sample("eta", dist.HalfNormal(dm.ETA_PRIOR))
+        h["ell"] = numpyro.sample("ell", dist.LogNormal(np.log(dm.LENGTH_PRIOR[0]),
+                                                        dm.LENGTH_PRIOR[1]))
+    return h
 
 
 def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
@@ -620,6 +637,54 @@ def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
     proportion to the coefficient (a misfit of the orbit's size grows with it).
     """
     return coeffs_se**2 + sigma[:, None] ** 2 + (sigma_rel * coeffs) ** 2
+
+
+def discrepancy_geometry(spec: CollapsedSpec, theta: dict, mu, sign, mu_ref, sign_ref):
+    """Scales ``g`` ``(n, 2, 2K+1)`` and coordinates ``x`` ``(n,)`` of the discrepancy at μ.
+
+    ``mu_ref``, ``sign_ref``: the training recordings, whose radii normalise both
+    (:mod:`bayeshopf.model.discrepancy`).
+    """
+    r_ref = reference_radius(spec, theta.get("a2", -1.0))
+    s = radius(spec, mu, sign, theta) / r_ref
+    s_ref = radius(spec, mu_ref, sign_ref, theta) / r_ref
+    return (dm.scales(jnp.asarray(spec.discrepancy_scale), s, s_ref),
+            dm.coordinate(spec.mu_tilde(mu), s, s_ref))
+
+
+def n_latent(spec: CollapsedSpec, n_rec: int) -> int:
+    """Columns of the discrepancy's latent ``z`` for ``n_rec`` training recordings (0 without)."""
+    if not spec.has_discrepancy:
+        return 0
+    return n_rec * int(dm.smooth_mask(2 * spec.n_harmonics + 1).sum())
+
+
+def linear_system(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, control=None):
+    """What is integrated out, per channel: ``(Φ_c, √v, d_c)`` of ``y_c ~ N(0, Φ_c V Φ_cᵀ + D_c)``.
+
+    ``Φ_c``: the map's (and the control's) columns (:func:`channel_designs`) and,
+    with the discrepancy, its latent columns
+    (:func:`~bayeshopf.model.discrepancy.latent_columns`, prior sd 1), so that
+    ``β`` of a draw holds ``[map, control, z]``; ``d_c``: the diagonal noise,
+    ``se² + σ_c² + (σ_rel g)²`` (:func:`~bayeshopf.model.discrepancy.independent_variance`),
+    or without the discrepancy ``se² + σ_c² + (σ_rel y)²`` (:func:`error_variance`).
+
+    Returns:
+        ``(Phis, sd, ds)``: two designs ``(n(2K+1), J')``, the prior sds ``(J',)``
+        and two noise diagonals ``(n(2K+1),)``.
+    """
+    Phis = channel_designs(spec, mu, sign, theta, control)
+    sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
+    if not spec.has_discrepancy:
+        var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
+        return Phis, sd, [var[:, c].reshape(-1) for c in range(2)]
+    g, x = discrepancy_geometry(spec, theta, mu, sign, mu, sign)
+    Phis = [jnp.concatenate([Phis[c], dm.latent_columns(g[:, c], x, theta["eta"], theta["ell"])],
+                            axis=1) for c in range(2)]
+    sd = jnp.concatenate([sd, jnp.ones(n_latent(spec, mu.shape[0]))])
+    ds = [dm.independent_variance(g[:, c], coeffs_se[:, c] ** 2 + theta["sigma"][c] ** 2,
+                                  theta["sigma_rel"]).reshape(-1) for c in range(2)]
+    return Phis, sd, ds
 
 
 def channel_designs(spec: CollapsedSpec, mu, sign, theta: dict, control=None) -> list:
@@ -635,13 +700,15 @@ def channel_designs(spec: CollapsedSpec, mu, sign, theta: dict, control=None) ->
     return [Phi.at[..., spec.n_map:].set(0.0).reshape(-1, spec.n_basis), flat]
 
 
-def coefficient_marginals(spec: CollapsedSpec, theta: dict, tau_mu, tau_shape, sigma,
-                          sigma_rel, mu, sign, coeffs, coeffs_se, control=None):
-    """``log p(y_c | θ)`` of both channels, the map integrated out, shape ``(2,)``."""
-    Phis = channel_designs(spec, mu, sign, theta, control)
-    sd = prior_sd(spec, tau_mu, tau_shape)
-    var = error_variance(coeffs, coeffs_se, sigma, sigma_rel)
-    return jnp.stack([log_marginal(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd)
+def coefficient_marginals(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se,
+                          control=None):
+    """``log p(y_c | θ)`` of both channels, the map (and discrepancy) integrated out, ``(2,)``.
+
+    ``theta`` holds the normal form's and the hyperparameters' values
+    (:func:`normal_form_sites`, :func:`hyper_sites`).
+    """
+    Phis, sd, ds = linear_system(spec, theta, mu, sign, coeffs, coeffs_se, control)
+    return jnp.stack([log_marginal(Phis[c], coeffs[:, c].reshape(-1), ds[c], sd)
                       for c in range(2)])
 
 
@@ -692,10 +759,9 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
         control: The control's fundamental ``(n_rec, 2)`` (``spec.control_scale``
             set), or ``None``.
     """
-    theta = normal_form_sites(spec)
-    tau_mu, tau_shape, sigma, sigma_rel = hyper_sites(spec)
-    marginals = spec_jit(spec, coefficient_marginals)(theta, tau_mu, tau_shape, sigma, sigma_rel,
-                                                     mu, sign, coeffs, coeffs_se, control)
+    theta = {**normal_form_sites(spec), **hyper_sites(spec)}
+    marginals = spec_jit(spec, coefficient_marginals)(theta, mu, sign, coeffs, coeffs_se,
+                                                     control)
     for c in range(2):
         numpyro.factor(f"marginal_{c}", marginals[c])
     if spec.omega_centre is not None and omega is not None:
@@ -711,15 +777,14 @@ def _map_conditional(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_
 
     With the control term, ``w1``'s control rows are zero (no response there).
     """
-    Phis = channel_designs(spec, mu, sign, theta, control)
-    sd = prior_sd(spec, theta["tau_mu"], theta["tau_shape"])
-    var = error_variance(coeffs, coeffs_se, theta["sigma"], theta["sigma_rel"])
-    pairs = [conditional_draw(Phis[c], coeffs[:, c].reshape(-1), var[:, c].reshape(-1), sd,
-                              eps[c]) for c in range(2)]
+    Phis, sd, ds = linear_system(spec, theta, mu, sign, coeffs, coeffs_se, control)
+    pairs = [conditional_draw(Phis[c], coeffs[:, c].reshape(-1), ds[c], sd, eps[c])
+             for c in range(2)]
     draw, mean = (jnp.stack([d for d, _ in pairs], axis=-1),
                   jnp.stack([m for _, m in pairs], axis=-1))
     if spec.control_scale is not None:
-        draw, mean = draw.at[spec.n_map:, 0].set(0.0), mean.at[spec.n_map:, 0].set(0.0)
+        ctl = slice(spec.n_map, spec.n_basis)
+        draw, mean = draw.at[ctl, 0].set(0.0), mean.at[ctl, 0].set(0.0)
     return draw, mean
 
 
@@ -728,13 +793,13 @@ def draw_map(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, key,
 
     With the control term, ``β``'s last two rows are the control's gain ``h`` (zero for ``w1``).
     """
-    eps = jax.random.normal(key, (2, spec.n_basis))
+    eps = jax.random.normal(key, (2, spec.n_basis + n_latent(spec, mu.shape[0])))
     return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps, control)[0]
 
 
 def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, control=None):
     """``E[β | y, θ]`` (J, 2): the map's coefficients at their conditional mean."""
-    eps = jnp.zeros((2, spec.n_basis))
+    eps = jnp.zeros((2, spec.n_basis + n_latent(spec, mu.shape[0])))
     return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps, control)[1]
 
 
@@ -762,7 +827,7 @@ def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi, control=None):
     ua, ub = control[0], control[1]
     c, s = jnp.cos(phi), jnp.sin(phi)
     cols = jnp.stack([ua * c + ub * s, ub * c - ua * s], axis=-1)
-    return w + cols @ beta[spec.n_map:]
+    return w + cols @ beta[spec.n_map:spec.n_basis]
 
 
 def extrapolation_sd(mu, mu_data, length: float) -> np.ndarray:
