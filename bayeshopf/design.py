@@ -5,13 +5,21 @@ the experimenter would measure. Every posterior draw ``θ_s`` (``s = 1…S``)
 predicts the candidate's amplitude ``A_s`` (peak-to-peak of z1), and a new
 recording scatters about it with the fit's own predictive error: the model
 error ``σ_c, σ_rel`` of that draw, the measurement error of a recording of
-similar amplitude (its segments' standard error) and the model discrepancy. Write ``τ_s`` for that scatter's standard deviation (estimated
-from :data:`N_REPLICATES` replicates per draw).
+similar amplitude (its segments' standard error) and the model discrepancy.
+Write ``τ_s`` for that scatter's standard deviation (estimated from
+:data:`N_REPLICATES` replicates per draw).
 
-With the model discrepancy (:mod:`bayeshopf.model.discrepancy`) each draw's
-amplitude includes a draw of the discrepancy at the candidate, so candidates
-away from the recordings carry the same wider scatter that ``predict`` and the
-diagram's bands show: one predictive for every command.
+The model error away from the recordings enters at its base scale
+(:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`, or the scale the fit was
+given), not at the wider scale the draws of a fit whose relative model error
+is above its limit take for bands of new measurements
+(:func:`~bayeshopf.posterior.default_extrapolation_scale`): as scatter in
+``τ_s`` that wider scale would discount every candidate away from the
+recordings, near the fold most, in fits of a few recordings whose relative
+model error is still near its prior. With the model discrepancy
+(:mod:`bayeshopf.model.discrepancy`) each draw's amplitude instead includes a
+draw of the discrepancy at the candidate, the same that ``predict`` and the
+diagram's bands use.
 
 The posterior of a target ``T`` (``μ_fold``, ``μ0``, or the amplitude at
 each μ of the diagram) after measuring ``y`` is the current posterior
@@ -207,21 +215,30 @@ def _band_widths(values: np.ndarray, ci: float) -> tuple[np.ndarray, np.ndarray]
 def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     """Predictive amplitudes of a new recording, ``(S, R)`` per draw (NaN: no branch).
 
-    ``coeffs`` are the fit's orbits at μ (:meth:`~bayeshopf.posterior.HybridPosterior.orbit_coefficients`,
-    with the model discrepancy where the fit has it); the noise is the fit's own
+    ``coeffs`` are the fit's orbits at μ
+    (:meth:`~bayeshopf.posterior.HybridPosterior.orbit_coefficients`, with the
+    model discrepancy where the fit has it); the noise is the fit's own
     new-measurement noise (``_noise_sd``), the one path every prediction takes.
     """
     from bayeshopf import posterior as bp
 
     c = np.repeat(coeffs[:, None], N_REPLICATES, axis=1)            # (S, R, 1, 2, 2K+1)
-    if fit.settings.extrapolation and fit.extrapolation_scale > 0:
+    scale = fit.settings.extrapolation_scale
+    if scale is None:        # the base scale, not the rule's wider one (module docstring)
+        scale = 0.0 if fit.spec.has_discrepancy else cm.EXTRAPOLATION_SCALE
+    if fit.settings.extrapolation and scale > 0:
         f = fit.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
         factor = bp.extrapolation_factor([mu], mu_data, fit.spec.mu_span,
                                          c.shape[0] * N_REPLICATES, int(rng.integers(2**31)),
-                                         scale=fit.extrapolation_scale)
+                                         scale=scale)
         c = bp.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
-    sd = fit._noise_sd(coeffs, se, [mu], branch)[:, None]            # (S, 1, 1, 2, 2K+1)
+    if fit.spec.has_discrepancy:
+        sd = fit._noise_sd(coeffs, se, [mu], branch)[:, None]        # (S, 1, 1, 2, 2K+1)
+    else:
+        idx = bp.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
+        sd = bp.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],
+                         np.asarray(fit.samples["sigma_rel"])[idx], se)
     return bp.amplitude_of(fit.spec, c + sd * rng.standard_normal(c.shape))[..., 0]
 
 

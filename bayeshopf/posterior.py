@@ -62,7 +62,7 @@ SIGMA_ORBIT_FRACTION = 0.01
 #: Relative model error above which the fit is reported as missing the orbits'
 #: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
 #: harmonic).
-SIGMA_REL_MAX = 0.02
+SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
 #: Draws used for bands (quantiles at 5%–95% are stable with 500).
 N_BAND_DRAWS = 500
 
@@ -74,6 +74,30 @@ def _common_over_mu(rng, shape) -> np.ndarray:
     is smooth (the frequency's predictive draws do the same, :func:`frequency_draws`).
     """
     return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
+
+
+def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCALE,
+                                misfit: float = cm.EXTRAPOLATION_SCALE_MISFIT,
+                                limit: float = cm.SIGMA_REL_LIMIT) -> np.ndarray:
+    """The scale ``S`` of the model error away from the recordings per draw (no discrepancy).
+
+    For a fit without the model discrepancy: ``S = 0.7`` in a draw whose relative
+    model error σ_rel is above the 2% limit and ``S = 0.1`` in the others
+    (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
+    :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
+    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
+    measurement's band averages over whether the fit misses the orbits' sizes.
+    Both constants were set from simulated rigs' held-out residuals
+    (``docs/inference_core.md``, "The class with missing physics"); the model
+    discrepancy (:mod:`bayeshopf.model.discrepancy`) is to replace the rule.
+
+    Args:
+        sigma_rel: Posterior draws of σ_rel.
+        base: The scale of a draw within the limit.
+        misfit: The scale of a draw above it.
+        limit: The limit of σ_rel (a saved fit passes its own three values).
+    """
+    return np.where(np.asarray(sigma_rel, dtype=float) > limit, misfit, base)
 
 
 def rms_scale(scales) -> float:
@@ -143,14 +167,15 @@ class HybridPosterior:
         For the draws :meth:`orbit_coefficients` uses with ``n_draws``:
         ``settings.extrapolation_scale`` when it is set (a user's override);
         otherwise 0 for a model with the discrepancy, whose Gaussian process
-        already widens the bands away from the recordings, and
-        :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` for one without.
+        already widens the bands away from the recordings, and for one without
+        it chosen by each draw's relative model error
+        (:func:`default_extrapolation_scale`).
         """
         idx = self._draw_indices(n_draws)
         s = self.settings.extrapolation_scale
-        if s is None:
-            s = 0.0 if self.spec.has_discrepancy else cm.EXTRAPOLATION_SCALE
-        return np.full(len(idx), float(s))
+        if s is not None or self.spec.has_discrepancy:
+            return np.full(len(idx), 0.0 if s is None else float(s))
+        return default_extrapolation_scale(np.asarray(self.samples["sigma_rel"])[idx])
 
     @property
     def extrapolation_scale(self) -> float:
@@ -159,6 +184,11 @@ class HybridPosterior:
         The setting when it is set (see :meth:`extrapolation_scales` otherwise).
         """
         return rms_scale(self.extrapolation_scales(None))
+
+    @property
+    def p_misfit(self) -> float:
+        """The posterior probability that the relative model error σ_rel is above its 2% limit."""
+        return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
         """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
@@ -278,7 +308,7 @@ class HybridPosterior:
         spec = self.spec
         if spec.control_scale is None:
             return None
-        h = np.asarray(self.run.betas)[:, spec.n_map:spec.n_basis, 1]                   # (n, 2): w2's
+        h = np.asarray(self.run.betas)[:, spec.n_map:spec.n_basis, 1]       # (n, 2): w2's
         gain = {part: interval(h[:, j], ci).to_json() for j, part in enumerate(("re", "im"))}
         u = np.asarray(self.features.control)                               # (n_rec, 2)
         resp = np.abs((h[:, :1] + 1j * h[:, 1:]) * (u[:, 0] - 1j * u[:, 1])[None])
@@ -780,6 +810,22 @@ def _discrepancy_program(spec: cm.CollapsedSpec):
         lambda a: one(a, mu_ref, sign_ref, mu, sign), (th, b))
 
 
+def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
+                        mu, sign: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The discrepancy's conditional mean and variance at μ per draw, and ``(σ_rel g)²``.
+
+    Each ``(n, n_mu, 2, 2K+1)`` (:func:`discrepancy_draws`).
+    """
+    ensure_x64()
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    ref_sign = np.where(features.unstable, -1.0, 1.0)
+    return tuple(np.asarray(a) for a in compiled_call(
+        "discrepancy", lambda: _discrepancy_program(spec),
+        (th, jnp.asarray(betas), jnp.asarray(features.mu), jnp.asarray(ref_sign),
+         jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+
+
 def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
                       mu, sign: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Draws of the model discrepancy ``Δ`` at μ, and its independent variance there.
@@ -794,14 +840,7 @@ def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: Harm
         ``(delta, nugget_var)``, each ``(n, n_mu, 2, 2K+1)``; ``nan`` where a draw
         has no orbit on the branch.
     """
-    ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    ref_sign = np.where(features.unstable, -1.0, 1.0)
-    mean, var, nugget = (np.asarray(a) for a in compiled_call(
-        "discrepancy", lambda: _discrepancy_program(spec),
-        (th, jnp.asarray(betas), jnp.asarray(features.mu), jnp.asarray(ref_sign),
-         jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+    mean, var, nugget = discrepancy_moments(spec, theta, betas, features, mu, sign)
     rng = np.random.default_rng([seed, 3])
     eps = _common_over_mu(rng, mean.shape)
     return mean + np.sqrt(var) * eps, nugget
@@ -815,8 +854,21 @@ def scale_orbits(coeffs, factor) -> np.ndarray:
 
 
 def _basis_names(spec: cm.CollapsedSpec, n: int) -> list[str]:
-    """The map's ``n`` basis functions' names (``"u1^2 m"``, ``"nn3"``, …), or ``psi0…``."""
+    """The names of the ``n`` rows of ``β``, or ``psi0…`` where the count does not match.
+
+    The map's basis functions (``"u1^2 m"``, ``"nn3"``, …), the control's, then
+    the discrepancy's latents (``"discrepancy3_a1"``: recording 3's fundamental
+    cosine).
+    """
     names = cm.basis_names(spec)
+    if spec.has_discrepancy and n > len(names):
+        from bayeshopf.model import discrepancy as dm
+
+        h = dm.harmonic_index(spec.n_harmonics)
+        parts = ["a1" if j <= spec.n_harmonics else "b1"
+                 for j in np.flatnonzero(dm.smooth_mask(h.size))]
+        names = names + [f"discrepancy{i}_{p}" for i in range((n - len(names)) // len(parts))
+                         for p in parts]
     return names if len(names) == n and len(set(names)) == n else [f"psi{j}" for j in range(n)]
 
 
@@ -824,8 +876,10 @@ def predictive_draws(spec: cm.CollapsedSpec, theta: dict, betas, gammas,
                      features: HarmonicFeatures, seed: int) -> dict:
     """A replicated recording at each training recording, one per posterior draw.
 
-    At recording ``i``'s μ and branch, each draw's predicted coefficients plus
-    ``N(0, se_i² + σ_c² + (σ_rel c)²)`` noise (``se_i`` its standard errors,
+    At recording ``i``'s μ and branch, each draw's predicted coefficients (with
+    the model discrepancy there, smooth and independent parts, where the model
+    has it) plus ``N(0, se_i² + σ_c² + (σ_rel c)²)`` noise (without ``σ_rel c``
+    with the discrepancy) (``se_i`` its standard errors,
     as in :meth:`HybridPosterior.ppc`) and, with ``gammas``, its frequency plus
     ``N(0, σ_ω² + se_ω,i²)``; the noise is independent between recordings.
 
@@ -846,9 +900,13 @@ def predictive_draws(spec: cm.CollapsedSpec, theta: dict, betas, gammas,
         sign = normal_form.UNSTABLE if unstable else normal_form.STABLE
         u = None if f.control is None else np.asarray(f.control)[idx]
         coeffs[:, idx] = orbit_coefficients(spec, theta, betas, f.mu[idx], sign, control=u)
+        if spec.has_discrepancy:
+            mean, var, nugget = discrepancy_moments(spec, theta, betas, f, f.mu[idx], sign)
+            coeffs[:, idx] += mean + np.sqrt(var + nugget) * rng.standard_normal(mean.shape)
         if gammas is not None:
             freq[:, idx] = frequency_draws(spec, theta, gammas, f.mu[idx], sign)
-    sd = np.stack([noise_sd(coeffs[:, i], theta["sigma"], theta["sigma_rel"], f.coeffs_se[i])
+    rel = 0.0 if spec.has_discrepancy else theta["sigma_rel"]     # the discrepancy's is in
+    sd = np.stack([noise_sd(coeffs[:, i], theta["sigma"], rel, f.coeffs_se[i])
                    for i in range(f.n_recordings)], axis=1)
     reps = coeffs + sd * rng.standard_normal(coeffs.shape)
     out = {"coeffs": reps, "amplitude": amplitude_of(spec, reps)}
@@ -958,9 +1016,15 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
             "sigma_rel": post.interval("sigma_rel").to_json(),
             "relative": interval(total).to_json()}
         d["fit"]["sigma_rel"] = float(np.median(total))
-    if post.settings.extrapolation and post.settings.extrapolation_scale is not None:
-        d["fit"]["extrapolation_scale"] = {"scale": post.extrapolation_scale,
-                                           "chosen_by": "setting"}
+    if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
+                                        or not post.spec.has_discrepancy):
+        d["fit"]["extrapolation_scale"] = {
+            "scale": post.extrapolation_scale,
+            "chosen_by": ("setting" if post.settings.extrapolation_scale is not None
+                          else "relative model error"),
+            "p_above_limit": post.p_misfit,
+            "sigma_rel_ci90": [float(q) for q in np.quantile(
+                np.asarray(post.samples["sigma_rel"]), [0.5 - CI / 2, 0.5 + CI / 2])]}
     for e in errs:
         if not e["ok"]:
             rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
@@ -987,15 +1051,24 @@ def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None)
                 warnings.append(f"fit: {e['name']}: measured frequency {e['measured_hz']:.4g} Hz "
                                 "outside its 90% predictive band")
     rel = d["fit"]["sigma_rel"]
-    if rel > SIGMA_REL_MAX:
+    if rel > SIGMA_REL_MAX and post.spec.has_discrepancy:
         warnings.append(
             f"fit: relative model error {100 * rel:.1f}% (limit {100 * SIGMA_REL_MAX:.0f}%): "
-            "the model misses the orbits by that fraction; "
-            + ("the model discrepancy carries it into the Hopf and fold intervals and the "
-               "bands" if post.spec.has_discrepancy else
-               "bands of new measurements away from the recordings are not calibrated for "
-               "such a fit")
-            + " (check them with fit --leave-one-out)")
+            "the model misses the orbits by that fraction; the model discrepancy carries it "
+            "into the Hopf and fold intervals and the bands, which may still be too narrow "
+            "(check them with fit --leave-one-out)")
+    elif rel > SIGMA_REL_MAX:
+        warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
+                        f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
+                        "fraction, and the predictive bands are that wide for that reason; "
+                        + (f"bands of new measurements away from the recordings use the "
+                           f"wider model-error scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such "
+                           f"fits in the {100 * post.p_misfit:.0f}% of the draws above the "
+                           "limit, and may still be too narrow"
+                           if post.settings.extrapolation_scale is None else
+                           "bands of new measurements away from the recordings are not "
+                           "calibrated for such a fit")
+                        + " (check them with fit --leave-one-out)")
     d["warnings"] = warnings
     return d
 
@@ -1033,7 +1106,8 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     spec = ci.build_spec(features, criticality, nn_width=settings.nn_width,
                          unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
                          frequency=settings.frequency, control=settings.control,
-                         discrepancy=settings.discrepancy)
+                         discrepancy=settings.discrepancy,
+                         discrepancy_floor=settings.discrepancy_floor)
     kwargs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -43,12 +43,12 @@ being validated, so it describes the misfit; set ``S`` from other rigs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.stats import binom
+from scipy.stats import binom, gaussian_kde
 from tqdm.auto import tqdm
 
 from bayeshopf._x64 import ensure_x64
@@ -95,6 +95,8 @@ class HeldOut:
             error away from the recordings (``nan`` for a plug-in).
         base_log_var: Variance of that log amplitude (``nan`` for a plug-in).
         away_sd: The unit process's sd ``c`` at μ (module docstring; ``nan`` for a plug-in).
+        draws: The predictive amplitude draws where the branch exists (for
+            :meth:`Fold.log_density`).
     """
 
     median: float
@@ -106,6 +108,7 @@ class HeldOut:
     base_log_median: float = np.nan
     base_log_var: float = np.nan
     away_sd: float = np.nan
+    draws: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -121,10 +124,10 @@ class Fold:
         predictions: Method name → :class:`HeldOut`.
         fit: The fold's :class:`~bayeshopf.posterior.HybridPosterior` (kept only when asked;
             both methods come from it).
-        extrapolation_scale: The scale ``S`` of the model error away from the
-            recordings of this fold's refit, its rms over the draws
-            (:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`: each
-            draw's by its relative model error unless set; 0 when off).
+        extrapolation_scale: The scale ``S`` of the extra model error away from
+            the recordings of this fold's refit
+            (:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`: the
+            setting; 0 with the model discrepancy and no setting, or when off).
     """
 
     name: str
@@ -144,6 +147,19 @@ class Fold:
     def relative_error(self, method: str) -> float:
         """``|Â − A| / A`` of ``method``'s median prediction."""
         return float(abs(self.predictions[method].median - self.measured) / self.measured)
+
+    def log_density(self, method: str = "bayes") -> float:
+        r"""``log p(A | y_{−i})``: the predictive density of the held-out amplitude.
+
+        A Gaussian kernel density of the predictive draws (SciPy's
+        ``gaussian_kde``, Scott's bandwidth) at the measured amplitude, times the
+        share of draws in which the branch exists there (``-inf`` where none).
+        """
+        p = self.predictions[method]
+        d = p.draws
+        if d is None or np.size(d) < 2 or np.ptp(d) == 0:
+            return -np.inf
+        return float(np.log(p.p_exists) + gaussian_kde(d).logpdf(self.measured)[0])
 
     def log_residual(self, method: str = "bayes") -> float:
         """``log A − median log Â`` against the band without the model error away from the data."""
@@ -166,7 +182,7 @@ class LeaveOneOut:
     def extrapolation_scales(self) -> tuple[float, ...]:
         """The refits' scales ``S`` of the model error away from the recordings, sorted, unique.
 
-        Each fold's refit chooses its own by default (by its relative model error).
+        The setting; 0 for refits with the model discrepancy and no setting.
         """
         return tuple(sorted({f.extrapolation_scale for f in self.folds}))
 
@@ -255,6 +271,7 @@ class LeaveOneOut:
                 "mu_fold_sd": float(np.nanstd(fold_mu, ddof=1)) if fold_mu.size > 1 else np.nan,
                 "mu_fold_range": [float(np.nanmin(fold_mu)), float(np.nanmax(fold_mu))],
                 "mean_band_width": float(np.nanmean(width)),
+                "log_predictive_density": float(sum(f.log_density(m) for f in self.folds)),
             }
         return out
 
@@ -415,7 +432,7 @@ def _bayes_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
                    mu_fold=_triple(post, "mu_fold"), mu0=_triple(post, "mu0"),
                    base_log_median=float(np.median(log_base)) if log_base.size else np.nan,
                    base_log_var=float(np.var(log_base)) if log_base.size else np.nan,
-                   away_sd=float(c))
+                   away_sd=float(c), draws=amp[ok])
 
 
 def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
@@ -428,7 +445,7 @@ def _map_prediction(post: HybridPosterior, mu: float, branch: str, coeffs_se,
     fold = float(p["mu_fold"]) if "mu_fold" in p else np.nan
     mu0 = float(p["mu0"])
     return HeldOut(median=point, lo=float(lo), hi=float(hi), p_exists=float(np.isfinite(point)),
-                   mu_fold=(fold, fold, fold), mu0=(mu0, mu0, mu0))
+                   mu_fold=(fold, fold, fold), mu0=(mu0, mu0, mu0), draws=band)
 
 
 def predict_held_out(post: HybridPosterior, method: str, mu: float, branch: str,
@@ -507,11 +524,11 @@ def leave_one_out(
     for name in tqdm(names, desc="leave-one-out", disable=not progress):
         i = all_names.index(name)
         keep = [j for j in range(features.n_recordings) if j != i]
-        post = fit_hybrid(features.subset(keep), criticality, seed=seed, settings=settings,
-                          progress=False)
+        train, held = _fold_features(rs, features, keep, i, settings)
+        post = fit_hybrid(train, criticality, seed=seed, settings=settings, progress=False)
         mu, branch = float(features.mu[i]), "unstable" if features.unstable[i] else "stable"
-        control = None if features.control is None else features.control[i][None]
-        preds = {m: predict_held_out(post, m, mu, branch, features.coeffs_se[i], control)
+        control = None if held.control is None else held.control[0][None]
+        preds = {m: predict_held_out(post, m, mu, branch, held.coeffs_se[0], control)
                  for m in methods}
         out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
                         measured_sd=float(features.amplitude_sd[i]), predictions=preds,
@@ -519,6 +536,24 @@ def leave_one_out(
                         extrapolation_scale=post.extrapolation_scale
                         if settings.extrapolation else 0.0))
     return LeaveOneOut(folds=tuple(out), methods=methods)
+
+
+def _fold_features(rs, features: HarmonicFeatures, keep: list, i: int,
+                   settings: CollapsedSettings) -> tuple[HarmonicFeatures, HarmonicFeatures]:
+    """The refit's features without recording ``i``, and recording ``i``'s in their frame.
+
+    From recordings, the training features are extracted without the held-out
+    recording (its frame, the centre and scale of the orbits, built from the
+    others alone), and the held-out recording's standard errors and control are
+    then expressed in that frame. From features, the common frame is kept.
+    """
+    if isinstance(rs, HarmonicFeatures):
+        return features.subset(keep), features.subset([i])
+    kw = dict(n_harmonics=settings.n_harmonics, segment_periods=settings.segment_periods)
+    recs = tuple(rs.recordings)
+    train = extract_harmonics(replace(rs, recordings=tuple(recs[j] for j in keep)), **kw)
+    held = extract_harmonics(replace(rs, recordings=(recs[i],)), frame=train.frame, **kw)
+    return train, held
 
 
 def _scales_text(scales) -> str:

@@ -555,6 +555,12 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
     assert main(["demo", "--fast", "--out", str(tmp_path / "b"), "--no-figures"]) == 2
     capsys.readouterr()
     assert seen["settings"].extrapolation_scale is None      # chosen by the fit's σ_rel
+    assert seen["settings"].discrepancy is False              # not yet the default
+    seen.clear()
+    assert main(["demo", "--fast", "--out", str(tmp_path / "d"), "--no-figures",
+                 "--discrepancy"]) == 2
+    capsys.readouterr()
+    assert seen["settings"].discrepancy is True
     for bad in ("0", "-1", "nan"):
         seen.clear()
         assert main(["demo", "--fast", "--out", str(tmp_path / "c"), "--no-figures",

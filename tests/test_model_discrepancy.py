@@ -64,8 +64,9 @@ def test_latent_columns_give_the_dense_marginal():
     y = rng.standard_normal(Phi.shape[0])
     C = np.asarray(dm.latent_columns(jnp.asarray(g), jnp.asarray(x), eta, ell))
     d = np.asarray(dm.independent_variance(g, se2, sigma_rel)).reshape(-1)
+    sd_all = np.concatenate([sd, np.ones(C.shape[1])])
     got = float(cm.log_marginal(jnp.asarray(np.hstack([Phi, C])), jnp.asarray(y),
-                                jnp.asarray(d), jnp.asarray(np.concatenate([sd, np.ones(C.shape[1])]))))
+                                jnp.asarray(d), jnp.asarray(sd_all)))
     cov = (Phi * sd**2) @ Phi.T + _dense_cov(g, x, eta, ell, sigma_rel) + np.diag(se2.reshape(-1))
     want = multivariate_normal(np.zeros(y.size), cov).logpdf(y)
     # the jitter of the unit kernel's factor is 1e-10 of its diagonal
@@ -114,3 +115,19 @@ def test_far_from_the_recordings_the_variance_returns_to_the_prior():
     mean, var = (np.asarray(a) for a in dm.conditional(jnp.asarray(z), jnp.asarray(g_new),
                                                       jnp.asarray(x), jnp.asarray(far), 0.3, 0.5))
     assert var[0, 1] == pytest.approx(0.09, rel=1e-9) and abs(mean[0, 1]) < 1e-12
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.5])
+def test_scales_follow_the_harmonic_power_of_the_radius(floor):
+    """``g = q √((s^{2h} + κ m_h)/((1+κ) m_h))``, ``m_h`` the training mean of ``s^{2h}``:
+    ``q s^h / √m_h`` without a floor; the training recordings' mean square is ``q²``."""
+    q = np.tile(np.array([0.0, 2.0, 0.5, 2.0, 0.5]), (2, 1))
+    s_ref = np.array([0.5, 1.0, 1.5])
+    s = np.array([0.2, 2.0])
+    g = np.asarray(dm.scales(jnp.asarray(q), jnp.asarray(s), jnp.asarray(s_ref), floor))
+    for k, h in enumerate([0, 1, 2, 1, 2]):
+        m = np.mean(s_ref ** (2 * h))
+        want = q[0, k] * np.sqrt((s ** (2 * h) + floor * m) / ((1 + floor) * m))
+        assert g[:, 0, k] == pytest.approx(want, rel=1e-12)
+    g_ref = np.asarray(dm.scales(jnp.asarray(q), jnp.asarray(s_ref), jnp.asarray(s_ref), floor))
+    assert np.mean(g_ref[:, 0, 1:] ** 2, axis=0) == pytest.approx(q[0, 1:] ** 2, rel=1e-12)

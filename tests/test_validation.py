@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from math import comb, log
 
+import numpy as np
 import pytest
 
 from bayeshopf.validation import Fold, HeldOut, LeaveOneOut
@@ -95,6 +96,11 @@ def test_leave_one_out_refits_without_the_held_out_recording_and_predicts_it(one
     assert (fold.name, fold.mu, fold.branch) == (name, 16.7, "stable")
     assert name not in fold.fit.features.names             # refitted without it
     assert fold.fit.features.n_recordings == len(rs) - 1
+    # ... in a frame built without it (the centre and scale of the other orbits)
+    from bayeshopf.features.harmonics import extract_harmonics
+
+    full = extract_harmonics(rs).frame
+    assert not np.allclose(fold.fit.features.frame.L, full.L, rtol=1e-6, atol=0)
     for m in loo.methods:
         p = fold.predictions[m]
         assert p.lo <= p.median <= p.hi and p.p_exists == 1.0
@@ -137,12 +143,12 @@ def test_plug_in_map_is_the_conditional_mean_and_fits_the_training_orbits(one_fo
     f, spec = post.features, post.spec
     th = {k: jnp.asarray(v[0]) for k, v in theta.items()}
     sign = jnp.asarray(np.where(f.unstable, -1.0, 1.0))
-    Phi = np.asarray(cm.design(spec, jnp.asarray(f.mu), sign, th)).reshape(-1, spec.n_basis)
-    v = np.asarray(cm.prior_sd(spec, th["tau_mu"], th["tau_shape"])) ** 2
-    var = np.asarray(cm.error_variance(f.coeffs, f.coeffs_se, np.asarray(th["sigma"]),
-                                       float(th["sigma_rel"])))
+    control = None if spec.control_scale is None else jnp.asarray(f.control)
+    Phis, sd, ds = cm.linear_system(spec, th, jnp.asarray(f.mu), sign, jnp.asarray(f.coeffs),
+                                    jnp.asarray(f.coeffs_se), control)
+    v = np.asarray(sd) ** 2
     for c in range(2):
-        d = var[:, c].reshape(-1)
+        Phi, d = np.asarray(Phis[c]), np.asarray(ds[c])
         y = f.coeffs[:, c].reshape(-1)
         direct = np.linalg.solve(Phi.T @ (Phi / d[:, None]) + np.diag(1 / v), Phi.T @ (y / d))
         assert beta[:, c] == pytest.approx(direct, rel=1e-5, abs=1e-8 * np.abs(direct).max())
@@ -267,3 +273,22 @@ def test_held_out_scale_skips_folds_without_a_band():
     assert LeaveOneOut(folds=loo.folds + (gone,), methods=("bayes",)).held_out_scale() == \
         pytest.approx(loo.held_out_scale(), rel=1e-9)
     assert np.isnan(LeaveOneOut(folds=(gone,), methods=("bayes",)).held_out_scale())
+
+
+def test_log_density_is_the_predictive_density_at_the_measured_amplitude():
+    """Draws from N(1, 0.05²) with the branch in 80% of them: log(0.8) + log N(A; 1, 0.05²)."""
+    from dataclasses import replace
+
+    from scipy.stats import norm
+
+    rng = np.random.default_rng(0)
+    draws = rng.normal(1.0, 0.05, 20000)
+    f = _fold(1.03, 0.9, 1.1, 14.6)
+    held = replace(f.predictions["bayes"], p_exists=0.8, draws=draws)
+    f = replace(f, predictions={"bayes": held})
+    want = np.log(0.8) + norm(1.0, 0.05).logpdf(1.03)
+    assert f.log_density("bayes") == pytest.approx(want, abs=0.02)
+    loo = LeaveOneOut(folds=(f, f), methods=("bayes",))
+    assert loo.summary()["bayes"]["log_predictive_density"] == pytest.approx(2 * want, abs=0.04)
+    no_draws = replace(f, predictions={"bayes": replace(held, draws=None)})
+    assert no_draws.log_density("bayes") == -np.inf

@@ -51,10 +51,14 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
                    help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
     p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
-                   help="an extra model error away from the recordings on top of the model "
-                   "discrepancy: its half-normal scale in log orbit size (default none: the "
-                   "discrepancy, learned with the fit, widens the bands there); it widens new "
-                   "measurements' bands between and beyond the recordings only")
+                   help="half-normal scale of the model error away from the recordings, in "
+                   "log orbit size (default: per posterior draw 0.1, or 0.7 where the fit's "
+                   "relative model error is above 2%%; none with --discrepancy): it widens "
+                   "new measurements' bands between and beyond the recordings only")
+    p.add_argument("--discrepancy", action="store_true",
+                   help="fit with the model discrepancy, a Gaussian process over the diagram "
+                   "on the orbits' fundamental whose scale is sampled with the Hopf point and "
+                   "the fold (docs/model_discrepancy.md; not yet the default)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -246,7 +250,10 @@ def _print_leave_one_out(summary: dict) -> None:
         _print_row(r, r["measured"], r["bayes"], "ci90", r["bayes"]["inside"])
     c, s = loo["check"], loo["summary"]
     print(f"{c['inside_ci90']}/{c['n_folds']} held-out amplitudes inside their bands (P = "
-          f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}")
+          f"{c['coverage_p']:.2g} if calibrated); mean band width {s['mean_band_width']:.4g} {au}"
+          + ("" if s.get("log_predictive_density") is None else
+             f"; log predictive density of the held-out amplitudes "
+             f"{s['log_predictive_density']:.4g}"))
     if c.get("held_out_scale") is not None:
         print(f"model error away from the recordings: prior scale {c['prior_scale']}; the "
               f"held-out residuals' own {c['held_out_scale']:.2g} (read off these recordings)")
@@ -271,13 +278,20 @@ def _print_diagnostics(summary: dict) -> None:
     disc = diag["fit"].get("discrepancy")
     if disc:
         eta = disc["eta"]
+        lo, hi = next(v for k, v in eta.items() if k.startswith("ci"))
         print(f"model discrepancy (smooth, of the fundamental): {100 * eta['median']:.2g}% "
-              f"[{100 * eta['lo']:.2g}, {100 * eta['hi']:.2g}] of the orbit size; it is in "
-              "the posterior, so the intervals and bands include it")
+              f"[{100 * lo:.2g}, {100 * hi:.2g}] of the orbit size; it is in the posterior, "
+              "so the intervals and bands include it")
     away = diag["fit"].get("extrapolation_scale")
     if away:
-        print(f"bands of new measurements away from the recordings: extra model-error scale "
-              f"{away['scale']:.2g} (as set)")
+        from bayeshopf.model import collapsed as cm
+
+        why = ("as set" if away["chosen_by"] == "setting" else
+               f"the rms over the draws: {cm.EXTRAPOLATION_SCALE_MISFIT:g} in the "
+               f"{100 * away['p_above_limit']:.0f}% whose relative model error is above the "
+               f"{100 * cm.SIGMA_REL_LIMIT:g}% limit, {cm.EXTRAPOLATION_SCALE:g} in the others")
+        print(f"bands of new measurements away from the recordings: model-error scale "
+              f"{away['scale']:.2g} ({why})")
     for w in diag.get("warnings", []):
         print(f"warning: {w}")
 
@@ -310,9 +324,9 @@ def _run_hybrid(rs, criticality, args, out, truth=None, extra=None):
                        "(e.g. 0.9)")
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (an "
-                       "extra model error away from the recordings, in log orbit size, on top "
-                       "of the model discrepancy; by default none)")
+        raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
+                       "default per draw 0.1, or 0.7 where the relative model error is above "
+                       "2%)")
     report.check_output_folder(out, args.force)
     worker = None
     if not args.no_figures:   # bayeshopf._preload: imports beside NUTS, a figure process
@@ -345,7 +359,8 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker):
     t0 = time.perf_counter()
     settings = CollapsedSettings.fast() if args.fast else CollapsedSettings()
     settings = replace(settings, inference=args.inference,
-                       control=not getattr(args, "no_control", False))
+                       control=not getattr(args, "no_control", False),
+                       discrepancy=bool(getattr(args, "discrepancy", False)))
     if getattr(args, "extrapolation_scale", None) is not None:
         settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
     if criticality == "auto":

@@ -101,20 +101,28 @@ class CollapsedSettings:
         extrapolation: Whether a new measurement's band includes the model error
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
-        extrapolation_scale: ``None`` (the default): no extra model error away
-            from the recordings beyond the model discrepancy (a fit without
-            the discrepancy takes :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`);
-            a number: the half-normal scale ``S`` of an extra error
-            ``s_e ~ HalfNormal(S)`` in log orbit size, a user's override that
-            changes the bands of new measurements only.
+        extrapolation_scale: Half-normal scale ``S`` of the model error away
+            from the recordings, ``s_e ~ HalfNormal(S)`` in log orbit size; it
+            changes the bands of new measurements only. ``None`` (the default):
+            with the discrepancy none; without it each posterior draw chooses
+            by its relative model error σ_rel,
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7)
+            where σ_rel is above :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`
+            (2%), :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1)
+            otherwise (:func:`~bayeshopf.posterior.default_extrapolation_scale`).
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").
         discrepancy: Whether the model includes the model discrepancy, a
-            Gaussian process along the branch on the orbits' harmonics whose
+            Gaussian process over the diagram on the orbits' fundamental whose
             scale and length are sampled with the normal form
-            (:mod:`bayeshopf.model.discrepancy`). Off, the model is the one
-            without it (a relative model error ``σ_rel y`` instead).
+            (:mod:`bayeshopf.model.discrepancy`). Off (the default until it is
+            shown to calibrate the bands better than the rule above;
+            ``docs/model_discrepancy.md``), the model has a relative model error
+            ``σ_rel y`` instead.
+        discrepancy_floor: ``κ``, the floor of the discrepancy's scale near the
+            Hopf point relative to its training mean
+            (:func:`~bayeshopf.model.discrepancy.scales`; 0: purely relative).
     """
 
     n_harmonics: int = 4
@@ -137,16 +145,18 @@ class CollapsedSettings:
     extrapolation: bool = True
     control: bool = True
     extrapolation_scale: float | None = None
-    discrepancy: bool = True
+    discrepancy: bool = False
+    discrepancy_floor: float = dm.FLOOR
 
     def __post_init__(self):
         s = self.extrapolation_scale
         if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
                               or not math.isfinite(s) or s <= 0):
             raise FitError("extrapolation_scale: a positive number or None expected (the "
-                           "half-normal scale of an extra model error away from the "
-                           "recordings, in log orbit size; None: none beyond the model "
-                           f"discrepancy); got {s!r}")
+                           "half-normal scale of the model error away from the recordings, "
+                           f"in log orbit size; None: {cm.EXTRAPOLATION_SCALE} or "
+                           f"{cm.EXTRAPOLATION_SCALE_MISFIT} by the fit's relative model "
+                           f"error, or none with the discrepancy); got {s!r}")
 
     @classmethod
     def fast(cls) -> CollapsedSettings:
@@ -158,7 +168,8 @@ class CollapsedSettings:
 def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
                unfolding: str = "curved", mu_label: str = "mu",
                mu_units: str = "", frequency: bool = True,
-               control: bool = True, discrepancy: bool = True) -> cm.CollapsedSpec:
+               control: bool = True, discrepancy: bool = False,
+               discrepancy_floor: float = dm.FLOOR) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
 
     The control term is on when ``control`` is true and the features hold a
@@ -203,6 +214,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         control_scale=control_scale,
         discrepancy_scale=(tuple(map(tuple, dm.coefficient_scale(features.coeffs).tolist()))
                            if discrepancy else None),
+        discrepancy_floor=float(discrepancy_floor),
     )
 
 

@@ -114,8 +114,11 @@ process in μ conditioned on ``δ_b = 0`` at that branch's training recordings,
            k(μ, μ') = e^{-(μ-μ')^2 / 2ℓ^2},
 
 ``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``, with ``S``
-the setting ``extrapolation_scale`` (none by default; a fit without the
-discrepancy takes :data:`EXTRAPOLATION_SCALE`).
+the setting ``extrapolation_scale``; unset, a fit with the discrepancy takes
+none, and a fit without it takes :data:`EXTRAPOLATION_SCALE` in a posterior draw
+whose σ_rel is within :data:`SIGMA_REL_LIMIT` and :data:`EXTRAPOLATION_SCALE_MISFIT`
+in one above it (``posterior.default_extrapolation_scale``, the rule of the model
+without the discrepancy, kept while the discrepancy is not the default).
 """
 
 from __future__ import annotations
@@ -153,12 +156,23 @@ SIGMA_OMEGA_PRIOR = 0.01
 #: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
 FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
 #: Half-normal scale of the extra model error away from the recordings, ``s_e`` (log
-#: orbit size), of a fit without the model discrepancy (module docstring).
+#: orbit size), of a fit without the model discrepancy whose relative model error σ_rel
+#: passes its check (:data:`SIGMA_REL_LIMIT`; module docstring).
 EXTRAPOLATION_SCALE = 0.1
+#: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
+#: (``posterior.default_extrapolation_scale``), for a fit without the discrepancy.
+EXTRAPOLATION_SCALE_MISFIT = 0.7
+#: Relative model error σ_rel above which a fit without the discrepancy misses the
+#: orbits' sizes (its prior scale, 2% of each coefficient).
+SIGMA_REL_LIMIT = 0.02
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0
 #: Prior sd of the control's complex gain ``H`` in units of ``ρ / ū`` (module docstring).
 CONTROL_SCALE = 1.0
+#: Prior sd of the unfolding's curvature ``w`` (:func:`unfolding`; 0 is the paper's line).
+UNFOLDING_PRIOR_SD = 1.0
+#: Half-normal scale of the gaps to the fold and the Hopf point, in units of Δμ.
+GAP_PRIOR = 1.0
 #: Phases per orbit for the projection P (aliasing-free for K ≤ 8 with degree-3 terms).
 N_PHI = 32
 
@@ -191,6 +205,8 @@ class CollapsedSpec:
             (:mod:`bayeshopf.model.discrepancy`), or ``None`` for a model
             without it (then the relative model error is ``σ_rel y``, the
             model of fits saved before the discrepancy existed).
+        discrepancy_floor: ``κ`` of :func:`~bayeshopf.model.discrepancy.scales`
+            (0: purely relative to the model's orbit).
     """
 
     criticality: str
@@ -208,6 +224,7 @@ class CollapsedSpec:
     omega_centre: float | None = None
     control_scale: float | None = None
     discrepancy_scale: tuple | None = None
+    discrepancy_floor: float = 0.0
 
     @property
     def has_discrepancy(self) -> bool:
@@ -581,11 +598,11 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
     """The normal form's sites: gaps to the fold and the Hopf point (or κ), μ0, a2, a4.
 
     Subcritical: ``μ_SN = μ_min − g_fold``, ``μ0 = max(μ_SN, μ_u,max) + g_hopf``
-    with ``g ~ HalfNormal(Δμ)``, so every recording lies on its branch; ``a2``
+    with ``g ~ HalfNormal(GAP_PRIOR · Δμ)``, so every recording lies on its branch; ``a2``
     follows from the fold, ``β(μ_SN) = −a2²/4``. Supercritical (gauge
     ``a2 = −1``, ``a4 = −κ``): ``μ0 = μ_min − g_hopf``, ``κ ~ HalfNormal(1/Δμ)``.
     """
-    span = spec.mu_span
+    span = GAP_PRIOR * spec.mu_span
     if spec.criticality == "subcritical":
         g_fold = numpyro.sample("gap_fold", dist.HalfNormal(span))
         g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
@@ -595,7 +612,7 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
         mu0 = numpyro.deterministic("mu0", anchor + g_hopf)
         theta = {"mu0": mu0, "mu_fold": mu_fold}
         if spec.unfolding == "curved":
-            w = numpyro.sample("w_unfold", dist.Normal(0.0, 1.0))
+            w = numpyro.sample("w_unfold", dist.Normal(0.0, UNFOLDING_PRIOR_SD))
             theta["w_unfold"] = w
             beta_fold = -unfolding(mu_fold, mu0, w, mu_fold)
         else:
@@ -603,7 +620,7 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
         theta["a2"] = numpyro.deterministic("a2", 2.0 * jnp.sqrt(beta_fold))
     else:
         g_hopf = numpyro.sample("gap_hopf", dist.HalfNormal(span))
-        kappa = numpyro.sample("kappa", dist.HalfNormal(1.0 / span))
+        kappa = numpyro.sample("kappa", dist.HalfNormal(1.0 / spec.mu_span))
         theta = {"mu0": numpyro.deterministic("mu0", spec.mu_min - g_hopf), "a2": -1.0,
                  "a4": numpyro.deterministic("a4", -kappa)}
     return theta
@@ -648,7 +665,7 @@ def discrepancy_geometry(spec: CollapsedSpec, theta: dict, mu, sign, mu_ref, sig
     r_ref = reference_radius(spec, theta.get("a2", -1.0))
     s = radius(spec, mu, sign, theta) / r_ref
     s_ref = radius(spec, mu_ref, sign_ref, theta) / r_ref
-    return (dm.scales(jnp.asarray(spec.discrepancy_scale), s, s_ref),
+    return (dm.scales(jnp.asarray(spec.discrepancy_scale), s, s_ref, spec.discrepancy_floor),
             dm.coordinate(spec.mu_tilde(mu), s, s_ref))
 
 

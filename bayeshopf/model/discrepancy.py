@@ -65,6 +65,10 @@ SIGMA_REL_PRIOR = 0.02
 #: orbit's size and phase, which place the Hopf point and the fold); every
 #: harmonic has the independent relative part ``σ_rel``.
 SMOOTH_HARMONIC = 1
+#: ``κ``, the default floor of the scales relative to their training mean,
+#: ``g ∝ √((s^{2h} + κ\,\overline{s^{2h}}) / ((1 + κ)\,\overline{s^{2h}}))``; 0 makes the
+#: discrepancy purely relative (it vanishes with the orbit at the Hopf point).
+FLOOR = 0.0
 #: Jitter added to ``B``'s diagonal relative to its mean diagonal (a Cholesky factor
 #: of ``B`` where the measured errors are far below the discrepancy).
 JITTER = 1e-10
@@ -88,15 +92,15 @@ def coefficient_scale(coeffs) -> np.ndarray:
     return np.concatenate([np.zeros((2, 1)), mag, mag], axis=-1)
 
 
-def scales(q, s, s_ref):
-    """``g_{c,k,i}`` at radii ``s`` (n,), normalised by the training radii ``s_ref``: ``(n, 2, 2K+1)``.
+def scales(q, s, s_ref, floor: float = 0.0):
+    """``g_{c,k,i}`` at radii ``s`` (n,), normalised by training radii ``s_ref``, ``(n, 2, 2K+1)``.
 
-    ``nan`` in ``s`` (no orbit) gives ``nan``.
+    ``floor`` is ``κ`` (:data:`FLOOR`); ``nan`` in ``s`` (no orbit) gives ``nan``.
     """
     q = jnp.asarray(q)
     h = harmonic_index((q.shape[-1] - 1) // 2)
-    norm = jnp.sqrt(jnp.mean(s_ref[:, None] ** (2 * h[None]), axis=0))        # (2K+1,)
-    rel = s[:, None] ** h[None] / norm[None]                                   # (n, 2K+1)
+    m = jnp.mean(s_ref[:, None] ** (2 * h[None]), axis=0)                     # (2K+1,)
+    rel = jnp.sqrt((s[:, None] ** (2 * h[None]) + floor * m) / ((1 + floor) * m))
     return rel[:, None, :] * q[None]
 
 
@@ -133,7 +137,8 @@ def latent_columns(g, x, eta, ell):
     Args:
         g: Scales ``(n, M)`` of the training recordings.
         x: Their coordinates ``(n, 2)``.
-        eta, ell: The discrepancy's scale and length.
+        eta: The discrepancy's scale.
+        ell: Its length.
     """
     L = unit_factor(x, ell)                                            # (n, n)
     n, m = g.shape
@@ -160,8 +165,10 @@ def conditional(z, g_new, x, x_new, eta, ell):
     Args:
         z: The latent draws of one frame axis, ``(n S,)`` (recording-major).
         g_new: The new orbits' scales ``(n_new, M)``.
-        x: The training coordinates ``(n, 2)``; ``x_new`` the new ``(n_new, 2)``.
-        eta, ell: The discrepancy's scale and length.
+        x: The training coordinates ``(n, 2)``.
+        x_new: The new orbits' ``(n_new, 2)``.
+        eta: The discrepancy's scale.
+        ell: Its length.
 
     Returns:
         ``(mean, var)``, each ``(n_new, M)``; zero for the coefficients without
