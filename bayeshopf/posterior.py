@@ -12,14 +12,11 @@ diagram, the posterior predictive check and each recording's orbit error.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
@@ -33,18 +30,32 @@ from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import (
     HarmonicFeatures,
     extract_harmonics,
-    phase_design,
     reconstruct,
     time_design,
 )
 from bayeshopf.inference import collapsed as ci
 from bayeshopf.inference.cache import (
-    compiled_call,
     enable_compilation_cache,
     release_compiled,
 )
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import normal_form
+from bayeshopf.predictive import (  # noqa: F401 (re-exported: the one prediction path)
+    N_BAND_DRAWS,
+    _common_over_mu,
+    amplitude_of,
+    default_extrapolation_scale,
+    discrepancy_draws,
+    discrepancy_moments,
+    draw_indices,
+    extrapolation_factor,
+    frequency_draws,
+    noise_sd,
+    orbit_coefficients,
+    predictive_draws,
+    rms_scale,
+    scale_orbits,
+)
 
 #: Phases per predicted orbit.
 N_PHI = 64
@@ -63,50 +74,6 @@ SIGMA_ORBIT_FRACTION = 0.01
 #: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
 #: harmonic).
 SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
-#: Draws used for bands (quantiles at 5%–95% are stable with 500).
-N_BAND_DRAWS = 500
-
-
-def _common_over_mu(rng, shape) -> np.ndarray:
-    """Standard normals for coefficient draws ``(n, n_mu, …)``, one set per draw for every μ.
-
-    A new recording's noise at each μ has its exact marginal, and a band over μ
-    is smooth (the frequency's predictive draws do the same, :func:`frequency_draws`).
-    """
-    return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
-
-
-def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCALE,
-                                misfit: float = cm.EXTRAPOLATION_SCALE_MISFIT,
-                                limit: float = cm.SIGMA_REL_LIMIT) -> np.ndarray:
-    """The scale ``S`` of the model error away from the recordings per draw (no discrepancy).
-
-    For a fit without the model discrepancy: ``S = 0.7`` in a draw whose relative
-    model error σ_rel is above the 2% limit and ``S = 0.1`` in the others
-    (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
-    :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
-    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
-    measurement's band averages over whether the fit misses the orbits' sizes.
-    Both constants were set from simulated rigs' held-out residuals
-    (``docs/inference_core.md``, "The class with missing physics"); the model
-    discrepancy (:mod:`bayeshopf.model.discrepancy`) is to replace the rule.
-
-    Args:
-        sigma_rel: Posterior draws of σ_rel.
-        base: The scale of a draw within the limit.
-        misfit: The scale of a draw above it.
-        limit: The limit of σ_rel (a saved fit passes its own three values).
-    """
-    return np.where(np.asarray(sigma_rel, dtype=float) > limit, misfit, base)
-
-
-def rms_scale(scales) -> float:
-    """``sqrt(mean S²)``: the sd of the log factor per unit ``c`` when ``S`` varies by draw.
-
-    ``E[s²] = S²`` for ``s ~ HalfNormal(S)``.
-    """
-    s = np.asarray(scales, dtype=float)
-    return float(s[0]) if np.all(s == s[0]) else float(np.sqrt(np.mean(np.square(s))))
 
 
 def branch_sign(branch: str) -> float:
@@ -686,173 +653,6 @@ def harmonic_name(k: int) -> str:
     return {0: "the centre", 1: "the fundamental"}.get(k, f"harmonic {k}")
 
 
-def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
-    """``n`` draw indices spread evenly over ``total`` (all of them when ``n ≥ total``)."""
-    if n is None or n >= total:
-        return np.arange(total)
-    return np.unique(np.linspace(0, total - 1, n).round().astype(int))
-
-
-def _spec_key(spec: cm.CollapsedSpec) -> str:
-    """What the orbit and frequency programs close over: the spec, as JSON (0.1 ms)."""
-    return json.dumps(spec.to_dict(), sort_keys=True)
-
-
-def _orbit_program(spec: cm.CollapsedSpec):
-    """``(θ, β, μ per draw, sign) ↦ coefficients`` (to be compiled; lax.map over draws)."""
-    def one(a, sign):     # Φ(μ) β: the design of the likelihood, at every μ of the grid
-        t, b, mu = a
-        return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b[:spec.n_basis])
-
-    # one draw's network features (μ × phase × unit) in memory at a time
-    return lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu))
-
-
-def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
-    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid, ``(n, n_mu)``."""
-    th = {k: v[:, None] for k, v in th.items()}
-    return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
-
-
-def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: float, *,
-                       per_draw: bool = False, control=None):
-    """Predicted orbits' harmonic coefficients, ``(n, n_mu, 2, 2K+1)``, for draws ``(θ, β)``.
-
-    Args:
-        spec: Model structure.
-        theta: Draws of the nonlinear parameters, leading axis ``n``.
-        betas: Map coefficients, ``(n, J, 2)``.
-        mu: μ values ``(n_mu,)``, the same for every draw; with ``per_draw``,
-            shape ``(n, n_mu)`` (e.g. each draw's own fold).
-        sign: +1 stable, −1 unstable.
-        per_draw: Whether ``mu`` holds one row of μ per draw.
-        control: The control's fundamental ``(u_a, u_b)`` at each μ, ``(n_mu, 2)``:
-            the orbit as that control holds it (the response ``H U`` of
-            :mod:`bayeshopf.model.collapsed`, "Control", with ``β``'s last two
-            rows as ``h``); ``None``: the uncontrolled system's.
-    """
-    ensure_x64()
-    n = np.shape(betas)[0]
-    mu = np.asarray(mu, dtype=float)
-    mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    # stored (inference.cache.compiled_call): a warm process neither traces nor lowers it
-    c = np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
-        th, jnp.asarray(betas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
-    if control is None or spec.control_scale is None:
-        return c
-    cols = np.asarray(cm.control_columns(spec, np.asarray(control, float)))  # (n_mu, 2K+1, 2)
-    return c + np.einsum("mkj,njc->nmck", cols,
-                         np.asarray(betas)[:, spec.n_map:spec.n_basis, :])
-
-
-def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float, *,
-                    predictive: bool = False, omega_se: float = 0.0, seed: int = 0
-                    ) -> np.ndarray:
-    """Frequency (Hz) draws ``(n, n_mu)`` at μ for draws ``(θ, γ)``; ``nan`` where no LCO.
-
-    With ``predictive``, each draw gets a new recording's error
-    ``N(0, σ_ω² + omega_se²)`` (rad/s): one standard-normal number per draw for
-    every μ, so that a band over μ is smooth while each μ's marginal is exact.
-    """
-    ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    th = {k: jnp.asarray(v) for k, v in theta.items() if np.ndim(v) == 1}
-    om = np.asarray(compiled_call(
-        "frequency-grid", lambda: lambda *a: _frequency_grid(spec, *a),
-        (th, jnp.asarray(gammas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
-    if predictive:
-        sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
-        om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))
-    return om / (2 * np.pi)
-
-
-def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
-                         scale=cm.EXTRAPOLATION_SCALE) -> np.ndarray:
-    """Draws of ``e^{δ_b(μ)}``, the model error away from the recordings, ``(n, n_mu)``.
-
-    ``δ_b(μ) = s_e z c_b(μ)`` with ``s_e ~ HalfNormal(scale)`` and
-    ``z ~ N(0, 1)``, one pair per draw for every μ (smooth bands over μ, exact
-    marginals at each μ), and ``c_b`` :func:`~bayeshopf.model.collapsed.extrapolation_sd`
-    with ``ℓ = EXTRAPOLATION_LENGTH · Δμ`` (:mod:`bayeshopf.model.collapsed`).
-
-    Args:
-        mu: Where, ``(n_mu,)``.
-        mu_data: The branch's training μ.
-        mu_span: The recordings' μ span Δμ.
-        n: Draws.
-        seed: Seed (its own stream, apart from the measurement noise's).
-        scale: Half-normal scale of ``s_e``, one for all draws or ``(n,)``, one per
-            draw (:meth:`HybridPosterior.extrapolation_scales`).
-    """
-    rng = np.random.default_rng([seed, 1])
-    s = np.abs(rng.normal(0.0, np.broadcast_to(scale, (n,)), n))
-    z = rng.standard_normal(n)
-    c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
-    return np.exp((s * z)[:, None] * c[None])
-
-
-def _discrepancy_program(spec: cm.CollapsedSpec):
-    """``(θ, β, training μ and signs, μ, sign) ↦ (mean, var, nugget)`` of ``Δ`` per draw."""
-    from bayeshopf.model import discrepancy as dm
-
-    def one(a, mu_ref, sign_ref, mu, sign):
-        t, b = a
-        g_ref, x_ref = cm.discrepancy_geometry(spec, t, mu_ref, sign_ref, mu_ref, sign_ref)
-        g, x = cm.discrepancy_geometry(spec, t, mu, sign * jnp.ones_like(mu), mu_ref, sign_ref)
-        z = b[spec.n_basis:]                                          # (n_ref S, 2)
-        pairs = [dm.conditional(z[:, c], g[:, c], x_ref, x, t["eta"], t["ell"]) for c in range(2)]
-        mean = jnp.stack([p[0] for p in pairs], axis=1)               # (n_mu, 2, M)
-        var = jnp.stack([p[1] for p in pairs], axis=1)
-        return mean, var, (t["sigma_rel"] * g) ** 2
-
-    return lambda th, b, mu_ref, sign_ref, mu, sign: jax.lax.map(
-        lambda a: one(a, mu_ref, sign_ref, mu, sign), (th, b))
-
-
-def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
-                        mu, sign: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The discrepancy's conditional mean and variance at μ per draw, and ``(σ_rel g)²``.
-
-    Each ``(n, n_mu, 2, 2K+1)`` (:func:`discrepancy_draws`).
-    """
-    ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    ref_sign = np.where(features.unstable, -1.0, 1.0)
-    return tuple(np.asarray(a) for a in compiled_call(
-        "discrepancy", lambda: _discrepancy_program(spec),
-        (th, jnp.asarray(betas), jnp.asarray(features.mu), jnp.asarray(ref_sign),
-         jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
-
-
-def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
-                      mu, sign: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Draws of the model discrepancy ``Δ`` at μ, and its independent variance there.
-
-    Per posterior draw ``(θ, β, z)`` (``z`` the last rows of ``β``), the smooth
-    part's Gaussian-process conditional at μ on ``sign``'s branch
-    (:func:`~bayeshopf.model.discrepancy.conditional`), drawn with one set of
-    standard normals per draw for every μ (smooth bands, exact marginals), and
-    ``(σ_rel g)²``, the variance of a new recording's own relative error.
-
-    Returns:
-        ``(delta, nugget_var)``, each ``(n, n_mu, 2, 2K+1)``; ``nan`` where a draw
-        has no orbit on the branch.
-    """
-    mean, var, nugget = discrepancy_moments(spec, theta, betas, features, mu, sign)
-    rng = np.random.default_rng([seed, 3])
-    eps = _common_over_mu(rng, mean.shape)
-    return mean + np.sqrt(var) * eps, nugget
-
-
-def scale_orbits(coeffs, factor) -> np.ndarray:
-    """Orbits ``(n, n_mu, 2, 2K+1)`` scaled about their centres (``a_0`` kept) by ``(n, n_mu)``."""
-    c = np.array(coeffs, dtype=float, copy=True)
-    c[..., 1:] *= np.asarray(factor)[..., None, None]
-    return c
-
-
 def _basis_names(spec: cm.CollapsedSpec, n: int) -> list[str]:
     """The names of the ``n`` rows of ``β``, or ``psi0…`` where the count does not match.
 
@@ -870,92 +670,6 @@ def _basis_names(spec: cm.CollapsedSpec, n: int) -> list[str]:
         names = names + [f"discrepancy{i}_{p}" for i in range((n - len(names)) // len(parts))
                          for p in parts]
     return names if len(names) == n and len(set(names)) == n else [f"psi{j}" for j in range(n)]
-
-
-def predictive_draws(spec: cm.CollapsedSpec, theta: dict, betas, gammas,
-                     features: HarmonicFeatures, seed: int) -> dict:
-    """A replicated recording at each training recording, one per posterior draw.
-
-    At recording ``i``'s μ and branch, each draw's predicted coefficients (with
-    the model discrepancy there, smooth and independent parts, where the model
-    has it) plus ``N(0, se_i² + σ_c² + (σ_rel c)²)`` noise (without ``σ_rel c``
-    with the discrepancy) (``se_i`` its standard errors,
-    as in :meth:`HybridPosterior.ppc`) and, with ``gammas``, its frequency plus
-    ``N(0, σ_ω² + se_ω,i²)``; the noise is independent between recordings.
-
-    Returns:
-        ``{"coeffs": (n, n_rec, 2, 2K+1), "amplitude": (n, n_rec)}`` and, with
-        ``gammas``, ``"frequency"`` (Hz) ``(n, n_rec)``; ``nan`` where a draw has
-        no LCO on the recording's branch.
-    """
-    f = features
-    n = np.shape(betas)[0]
-    rng = np.random.default_rng([seed, 2])
-    coeffs = np.full((n, f.n_recordings, 2, 2 * spec.n_harmonics + 1), np.nan)
-    freq = np.full((n, f.n_recordings), np.nan)
-    for unstable in (False, True):
-        idx = np.flatnonzero(f.unstable == unstable)
-        if idx.size == 0:
-            continue
-        sign = normal_form.UNSTABLE if unstable else normal_form.STABLE
-        u = None if f.control is None else np.asarray(f.control)[idx]
-        coeffs[:, idx] = orbit_coefficients(spec, theta, betas, f.mu[idx], sign, control=u)
-        if spec.has_discrepancy:
-            mean, var, nugget = discrepancy_moments(spec, theta, betas, f, f.mu[idx], sign)
-            coeffs[:, idx] += mean + np.sqrt(var + nugget) * rng.standard_normal(mean.shape)
-        if gammas is not None:
-            freq[:, idx] = frequency_draws(spec, theta, gammas, f.mu[idx], sign)
-    rel = 0.0 if spec.has_discrepancy else theta["sigma_rel"]     # the discrepancy's is in
-    sd = np.stack([noise_sd(coeffs[:, i], theta["sigma"], rel, f.coeffs_se[i])
-                   for i in range(f.n_recordings)], axis=1)
-    reps = coeffs + sd * rng.standard_normal(coeffs.shape)
-    out = {"coeffs": reps, "amplitude": amplitude_of(spec, reps)}
-    if gammas is not None:
-        sd_omega = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + f.omega_se[None] ** 2)
-        out["frequency"] = freq + sd_omega / (2 * np.pi) * rng.standard_normal(freq.shape)
-    return out
-
-
-def noise_sd(coeffs, sigma, sigma_rel, coeffs_se) -> np.ndarray:
-    """``√(se² + σ_c² + (σ_rel c)²)`` for predicted coefficients ``(n, ..., 2, 2K+1)``.
-
-    ``sigma`` ``(n, 2)`` and ``sigma_rel`` ``(n,)`` per draw; ``coeffs_se`` ``(2, 2K+1)``.
-    """
-    c = np.asarray(coeffs)
-    extra = (1,) * (c.ndim - 3)
-    s = np.asarray(sigma).reshape((-1,) + extra + (2, 1))
-    r = np.asarray(sigma_rel).reshape((-1,) + extra + (1, 1))
-    return np.sqrt(np.asarray(coeffs_se) ** 2 + s**2 + (r * c) ** 2)
-
-
-def amplitude_of(spec: cm.CollapsedSpec, coeffs) -> np.ndarray:
-    """Peak-to-peak of z1 of the orbits with these frame coefficients (last two axes).
-
-    ``z1 = c_1 + L_{1·} w`` is linear in the frame coordinates, so its harmonic
-    coefficients are ``L_{1·}`` applied to the frame's (the centre only shifts
-    ``a_0``, which the peak-to-peak ignores); only z1 is reconstructed, at 256 phases.
-    """
-    phi = np.linspace(0, 2 * np.pi, 256, endpoint=False)
-    K = (np.shape(coeffs)[-1] - 1) // 2
-    z1_coeffs = np.asarray(spec.frame.L)[0] @ np.asarray(coeffs)        # (..., 2K+1)
-    design = phase_design(phi, K).T                                       # (2K+1, 256)
-    if z1_coeffs.ndim < 3:
-        z1 = z1_coeffs @ design
-        return z1.max(axis=-1) - z1.min(axis=-1)
-    # a few draws at a time: the orbits of every draw at every μ at once (500 ×
-    # 120 × 256 values for a diagram's band) cost more in fresh memory than in
-    # arithmetic. The product is batched over the leading axis, one matrix
-    # product per draw either way, so the values are the same
-    out = np.empty(z1_coeffs.shape[:-1])
-    step = max(1, _CHUNK_POINTS // (int(np.prod(z1_coeffs.shape[1:-1])) * phi.size))
-    for i in range(0, z1_coeffs.shape[0], step):
-        z1 = z1_coeffs[i:i + step] @ design
-        out[i:i + step] = z1.max(axis=-1) - z1.min(axis=-1)
-    return out
-
-
-#: Orbit points reconstructed at once by :func:`amplitude_of` (a few MB, in cache).
-_CHUNK_POINTS = 1 << 19
 
 
 def diagnose(post: HybridPosterior, ppc: PosteriorPredictiveCheck | None = None) -> dict:

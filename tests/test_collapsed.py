@@ -246,7 +246,7 @@ def test_amplitude_in_chunks_equals_one_product(monkeypatch, shape):
     are those of one product over every draw, bit for bit."""
     from types import SimpleNamespace
 
-    import bayeshopf.posterior as bp
+    import bayeshopf.predictive as bp
 
     spec = SimpleNamespace(frame=PlanarFrame(np.array([0.6, 0.7]),
                                              np.array([[0.02, 0.01], [0.05, 0.3]])))

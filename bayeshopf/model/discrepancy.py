@@ -31,7 +31,7 @@ with ``Δ`` a zero-mean Gaussian process, independent between the frame axes
 * **Priors** (stated, informative; discrepancy and the normal form's parameters
   trade off, Brynjarsdóttir & O'Hagan 2014): ``η ~ HalfNormal(`` :data:`ETA_PRIOR` ``)``,
   ``ℓ ~ LogNormal`` (:data:`LENGTH_PRIOR`, in units of ``x``), ``σ_rel ~
-  HalfNormal(`` :data:`SIGMA_REL_PRIOR` ``)``.
+  HalfNormal(`` :data:`~bayeshopf.model.collapsed.SIGMA_REL_PRIOR` ``)``.
 
 The smooth part is carried by the fundamental (:data:`SMOOTH_HARMONIC`: the
 orbit's size and phase, which place the Hopf point and the fold) and is a
@@ -59,8 +59,6 @@ import numpy as np
 ETA_PRIOR = 0.05
 #: Log-normal prior of ``ℓ`` (median, log-sd), in units of ``x = s²/mean(s²)``.
 LENGTH_PRIOR = (0.5, 0.5)
-#: Half-normal scale of ``σ_rel``, the relative discrepancy of each recording alone.
-SIGMA_REL_PRIOR = 0.02
 #: The harmonic whose discrepancy is smooth over the diagram (the fundamental: the
 #: orbit's size and phase, which place the Hopf point and the fold); every
 #: harmonic has the independent relative part ``σ_rel``.
