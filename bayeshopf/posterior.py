@@ -821,7 +821,8 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
                          unfolding=settings.unfolding, mu_label=labels[0], mu_units=labels[1],
                          frequency=settings.frequency, control=settings.control,
                          discrepancy=settings.discrepancy,
-                         discrepancy_floor=settings.discrepancy_floor)
+                         discrepancy_floor=settings.discrepancy_floor,
+                         nn_seed=settings.nn_seed)
     kwargs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

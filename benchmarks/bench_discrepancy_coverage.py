@@ -101,7 +101,13 @@ def run(first: int, last: int, designs, models) -> None:
         by_design = {}
         for design, model in todo:
             if design not in by_design:
-                by_design[design] = recordings(system, diagram, design, seed)
+                try:
+                    by_design[design] = recordings(system, diagram, design, seed)
+                except Exception as e:            # a design's orbit this system lacks
+                    by_design[design] = f"{type(e).__name__}: {e}"
+            if isinstance(by_design[design], str):
+                print(seed, design, "skipped:", by_design[design], flush=True)
+                continue
             try:
                 res = fit_one(by_design[design], model)
             except Exception as e:                                     # record, go on

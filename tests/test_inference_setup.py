@@ -588,3 +588,29 @@ def test_svi_particles_one_after_another_give_the_vmapped_elbo():
     for k, v in ref.params.items():
         np.testing.assert_allclose(np.asarray(got.params[k]), np.asarray(v), rtol=1e-9,
                                    atol=1e-12)
+
+
+def test_the_hidden_layer_seed_and_the_discrepancy_reach_the_spec():
+    """``nn_seed`` draws another fixed hidden layer (N(0, 1) weights from NumPy's generator
+    with that seed); ``discrepancy`` adds the coefficient scales and the floor, and a spec
+    with them round-trips through its dict (a saved fit)."""
+    from bayeshopf.data.synthetic import demo_system
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference import collapsed as ci
+    from bayeshopf.model import collapsed as cm
+
+    rs, _ = demo_system(seed=11, fast=True)
+    f = extract_harmonics(rs)
+    base = ci.build_spec(f, "subcritical", nn_width=5)
+    other = ci.build_spec(f, "subcritical", nn_width=5, nn_seed=3)
+    want = np.random.default_rng(3)
+    np.testing.assert_array_equal(other.nn_hidden[0], want.standard_normal((3, 5)))
+    np.testing.assert_array_equal(other.nn_hidden[1], want.standard_normal(5))
+    assert not np.allclose(base.nn_hidden[0], other.nn_hidden[0])
+    assert base.discrepancy_scale is None and not base.has_discrepancy
+    disc = ci.build_spec(f, "subcritical", discrepancy=True, discrepancy_floor=0.5)
+    assert disc.has_discrepancy and disc.discrepancy_floor == 0.5
+    assert np.shape(disc.discrepancy_scale) == (2, 2 * f.n_harmonics + 1)
+    back = cm.CollapsedSpec.from_dict(json.loads(json.dumps(disc.to_dict())))
+    assert back.discrepancy_scale == disc.discrepancy_scale
+    assert back.discrepancy_floor == 0.5

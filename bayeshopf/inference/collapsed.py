@@ -80,6 +80,9 @@ class CollapsedSettings:
         n_harmonics: Harmonics per channel of the features.
         segment_periods: Segment length in periods.
         nn_width: Hidden units of the map's network.
+        nn_seed: Seed of the network's fixed hidden layer (a draw from its
+            prior, :func:`~bayeshopf.model.collapsed.hidden_layer`; refit with
+            others to see what the draw decides).
         unfolding: ``"curved"`` (default) or ``"linear"`` (the paper's ``μ − μ0``).
         inference: ``"nuts"`` (default) or ``"svi"``.
         num_chains: NUTS chains.
@@ -128,6 +131,7 @@ class CollapsedSettings:
     n_harmonics: int = 4
     segment_periods: float = 5.0
     nn_width: int = 16
+    nn_seed: int = 0
     unfolding: str = "curved"
     inference: str = "nuts"
     num_chains: int = 4
@@ -169,7 +173,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
                unfolding: str = "curved", mu_label: str = "mu",
                mu_units: str = "", frequency: bool = True,
                control: bool = True, discrepancy: bool = False,
-               discrepancy_floor: float = dm.FLOOR) -> cm.CollapsedSpec:
+               discrepancy_floor: float = dm.FLOOR, nn_seed: int = 0) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
 
     The control term is on when ``control`` is true and the features hold a
@@ -207,7 +211,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         mu_centre=float(0.5 * (mu.max() + mu.min())), mu_span=float(mu.max() - mu.min()),
         mu_min=float(mu.min()),
         mu_unstable_max=float(unstable_mu.max()) if unstable_mu.size else None,
-        orbit_scale=scale, nn_hidden=cm.hidden_layer(nn_width),
+        orbit_scale=scale, nn_hidden=cm.hidden_layer(nn_width, nn_seed),
         mu_label=mu_label, mu_units=mu_units,
         unfolding=unfolding if criticality == "subcritical" else "linear",
         omega_centre=float(np.mean(features.omega)) if frequency else None,

@@ -1,4 +1,4 @@
-r"""Model discrepancy: a Gaussian process along the branch on the orbits' harmonics.
+r"""Model discrepancy: a Gaussian process over the diagram on the orbits' harmonics.
 
 The normal form plus map is never exactly the rig. Following Kennedy & O'Hagan
 (2001), the recorded coefficients are the model's plus a discrepancy plus noise,
@@ -21,7 +21,9 @@ with ``Δ`` a zero-mean Gaussian process, independent between the frame axes
   the fold) share their discrepancy, while a stable and an unstable orbit at
   one μ need not.
 * **How large**: ``g_{c,k,i} = q_{c,h} s_i^h / (\overline{s^{2h}})^{1/2}`` for a
-  coefficient of harmonic ``h ≥ 1``, ``q_{c,h}`` the RMS size of that harmonic's
+  coefficient of harmonic ``h ≥ 1`` (with a floor ``κ``:
+  ``q_{c,h} ((s_i^{2h} + κ\overline{s^{2h}}) / ((1 + κ)\overline{s^{2h}}))^{1/2}``,
+  :func:`scales`), ``q_{c,h}`` the RMS size of that harmonic's
   coefficients in the training recordings (a data constant, like the orbit
   scale ρ), and ``g = 0`` for ``a_0`` (the centre has its own shift terms in the
   map). Harmonic ``h`` of a weakly nonlinear orbit grows as ``r^h``, so ``η`` is
@@ -67,8 +69,8 @@ SMOOTH_HARMONIC = 1
 #: ``g ∝ √((s^{2h} + κ\,\overline{s^{2h}}) / ((1 + κ)\,\overline{s^{2h}}))``; 0 makes the
 #: discrepancy purely relative (it vanishes with the orbit at the Hopf point).
 FLOOR = 0.0
-#: Jitter added to ``B``'s diagonal relative to its mean diagonal (a Cholesky factor
-#: of ``B`` where the measured errors are far below the discrepancy).
+#: Jitter added to the unit kernel's diagonal (a Cholesky factor where two
+#: recordings lie at one point of the diagram).
 JITTER = 1e-10
 
 
