@@ -184,9 +184,29 @@ class HybridPosterior:
                                control=control)
         if not self.spec.has_discrepancy:
             return c
-        delta, _ = discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features, mu,
-                                     branch_sign(branch), self.seed)
-        return c + delta
+        return c + self._discrepancy(mu, branch, n_draws)[0]
+
+    @cached_property
+    def _discrepancy_memo(self) -> dict:
+        return {}
+
+    def _discrepancy(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
+        """:func:`discrepancy_draws` at μ for the draws of ``n_draws``, once per μ and branch.
+
+        A prediction needs both its parts (the draw for the orbit, the
+        independent variance for the noise); they come from one computation.
+        """
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        key = (mu.tobytes(), branch, n_draws)
+        memo = self._discrepancy_memo
+        if key not in memo:
+            if len(memo) >= 64:
+                memo.clear()
+            idx = self._draw_indices(n_draws)
+            memo[key] = discrepancy_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                          self.run.betas[idx], self.features, mu,
+                                          branch_sign(branch), self.seed)
+        return memo[key]
 
     def recording_control(self, i: int):
         """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""
@@ -206,10 +226,7 @@ class HybridPosterior:
         sigma = np.asarray(self.samples["sigma"])[idx]
         if not self.spec.has_discrepancy:
             return noise_sd(coeffs, sigma, np.asarray(self.samples["sigma_rel"])[idx], se)
-        theta = {k: v[idx] for k, v in self.theta.items()}
-        _, nugget = discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features,
-                                      np.atleast_1d(mu), branch_sign(branch), self.seed)
-        nugget = nugget.reshape(np.shape(coeffs))
+        nugget = self._discrepancy(mu, branch)[1].reshape(np.shape(coeffs))
         extra = (1,) * (np.ndim(coeffs) - 3)
         s2 = sigma.reshape((-1,) + extra + (2, 1)) ** 2
         return np.sqrt(np.asarray(se) ** 2 + s2 + nugget)

@@ -689,8 +689,7 @@ def run() -> None:
     collector's permanent generation (:func:`gc.freeze`), so that the teardown's
     collections do not trace the heap of JAX, NumPyro, Matplotlib and ArviZ once
     more. Every file is written and closed by then, and the exit handlers still
-    run. A warm rig fit's process ended 0.53–0.63 s after :func:`main` returned
-    without it, 0.13 s with it (``docs/inference_core.md``, "Stop 42").
+    run (the time it saves: ``docs/changelog.md``).
     """
     code = main()
     gc.freeze()

@@ -77,18 +77,13 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     """Add the CPU flags below to ``XLA_FLAGS``, each unless the user set it.
 
     - :data:`SINGLE_THREAD_EIGEN`. With XLA's multithreaded Eigen pool, jaxlib
-      0.10 on CPU now and then stalls compiling the NUTS programs: one rig fit sat
-      for minutes in ``CompileAndLoad`` with every thread idle (PyAutoFit's issue
-      #1528 describes the same stall and the same cure); with the flag three runs
-      in a row took 5–8 s each. The models here are small, so one thread per
+      0.10 on CPU now and then stalls compiling the NUTS programs, every thread
+      idle in ``CompileAndLoad`` (PyAutoFit's issue #1528 describes the same stall
+      and the same cure). The models here are small, so one thread per
       computation costs nothing measurable.
     - :data:`CLASSIC_FUSION` (jaxlib ≥ 0.10 only: older XLA aborts on flags it
-      does not know). The fusion emitters cost compile time, not run time: with
-      an empty compilation cache ``bayeshopf fit`` of the rig took 38.8 s
-      without them against 49.7 s with them, ``bayeshopf demo`` 51.9 s against
-      60.2 s; warm, the rig took 22.3 s against 21.8 s (commit 2908a26,
-      ``benchmarks/cli_speed_fusion_emitters.json`` against that commit's
-      ``cli_speed.json``, both from one machine and session).
+      does not know). The fusion emitters cost compile time, not run time
+      (``benchmarks/cli_speed_fusion_emitters.json`` against ``cli_speed.json``).
 
     - With ``host_devices > 1``, :data:`HOST_DEVICES` ``=host_devices``: the CPU
       appears as that many devices, and NUTS splits its chains between them
@@ -104,11 +99,9 @@ def configure_xla_cpu(host_devices: int = 1) -> list[str]:
     bands' products, and SciPy's, loaded with its linear algebra, whose
     Cholesky factorisations and triangular solves jaxlib calls on CPU. Their
     worker threads busy-wait between calls, and the matrices here are far too
-    small to gain from them. On 2 cores SciPy's made the CLI's NUTS stage 2–3
-    times slower with two devices (``docs/inference_core.md``, "Stop 38");
-    NumPy's took the second core from the figure process while the CLI computed
-    features (0.86 s without a figure process, 1.15–1.27 s beside it with
-    NumPy's two threads, 0.96–1.01 s with one; "Stop 42").
+    small to gain from them: SciPy's slows the NUTS stage with two devices, and
+    NumPy's takes the second core from the figure process while the CLI computes
+    features (measurements in ``docs/changelog.md``).
 
     The XLA flags take effect only before JAX's first computation in the process
     (the CLI and the test suite call this first).

@@ -761,7 +761,7 @@ def _svi(kwargs, map_point: MapPoint, settings: CollapsedSettings, key, progress
                                    init_scale=0.01)
     # the particles one after another (lax.map), not vmapped: a batch of triangular solves
     # (the guide's and the collapsed likelihood's) runs on XLA's intra-op thread pool, and two
-    # such batches at once hung a run in eight when each waited for the pool ("Stop 45")
+    # such batches at once can hang, each waiting for the pool (docs/changelog.md)
     svi = SVI(cm.collapsed_model, guide, optax.adam(5e-3),
               Trace_ELBO(num_particles=SVI_PARTICLES, vectorize_particles=False))
     k_run, k_draw = jax.random.split(key)

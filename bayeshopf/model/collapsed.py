@@ -664,7 +664,8 @@ def discrepancy_geometry(spec: CollapsedSpec, theta: dict, mu, sign, mu_ref, sig
     """
     r_ref = reference_radius(spec, theta.get("a2", -1.0))
     s = radius(spec, mu, sign, theta) / r_ref
-    s_ref = radius(spec, mu_ref, sign_ref, theta) / r_ref
+    same = mu is mu_ref and sign is sign_ref          # the training recordings themselves
+    s_ref = s if same else radius(spec, mu_ref, sign_ref, theta) / r_ref
     return (dm.scales(jnp.asarray(spec.discrepancy_scale), s, s_ref, spec.discrepancy_floor),
             dm.coordinate(spec.mu_tilde(mu), s, s_ref))
 
