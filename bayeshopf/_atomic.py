@@ -11,8 +11,10 @@ import contextlib
 import os
 import secrets
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+from bayeshopf.errors import OutputError
 
 
 @contextlib.contextmanager
@@ -74,3 +76,85 @@ def swap_in(tmp: Path, folder: Path, tag: str) -> None:
         os.rename(old, folder)
         raise
     shutil.rmtree(old, ignore_errors=True)
+
+
+def move_into(stage: Path, folder: Path, files: Iterable[Path] | None = None) -> list[Path]:
+    """Move the finished files of the folder ``stage`` into ``folder``, each by :func:`os.replace`.
+
+    Where ``folder`` does not exist, ``stage`` itself is renamed to it (one
+    :func:`os.replace`). Otherwise every file moves to the same place relative
+    to ``folder`` (missing subfolders are made), replacing a file of that name
+    and leaving the others in ``folder`` as they were: each file is at every
+    moment either the old or the new one. ``stage`` must be on the same file
+    system as ``folder``; what is left of it is the caller's to remove.
+
+    Args:
+        stage: The folder the files were written into.
+        folder: Where they must end up.
+        files: The files of ``stage`` to move (default all, subfolders included).
+
+    Returns:
+        The paths the files now have.
+    """
+    if files is None and not folder.exists():
+        os.replace(stage, folder)
+        return sorted(p for p in folder.rglob("*") if p.is_file())
+    moved = []
+    for src in sorted(stage.rglob("*")) if files is None else files:
+        dst = folder / Path(src).relative_to(stage)
+        if Path(src).is_dir():
+            dst.mkdir(exist_ok=True)
+        else:
+            os.replace(src, dst)
+            moved.append(dst)
+    return moved
+
+
+@contextlib.contextmanager
+def new_folder(folder: Path) -> Iterator[Path]:
+    """A fresh empty folder beside ``folder``, swapped in for it when the block succeeds.
+
+    The caller writes the whole content into the yielded folder; on leaving
+    the block it replaces ``folder`` (an existing one as a whole, by
+    :func:`swap_in`). Whatever happens, the temporary folder is gone
+    afterwards and ``folder`` is either the old or the new content. Missing
+    parent folders are created.
+
+    Yields:
+        The temporary folder ``.{name}.tmp-{tag}`` to write.
+
+    Raises:
+        OSError: If a folder cannot be made or renamed.
+    """
+    tag = secrets.token_hex(4)
+    tmp = folder.parent / f".{folder.name}.tmp-{tag}"
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        os.mkdir(tmp)
+        yield tmp
+        swap_in(tmp, folder, tag)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def vacant_folder(folder: str | os.PathLike[str], overwrite: bool, how: str) -> Path:
+    """``folder`` as a path, where it is new or empty, or may be replaced (``overwrite``).
+
+    Args:
+        folder: The folder to write.
+        overwrite: Whether a non-empty ``folder`` may be replaced.
+        how: How the user allows that, for the message (``"pass overwrite=True"``).
+
+    Raises:
+        OutputError: If a file is in its place, or it is not empty and not
+            ``overwrite``.
+    """
+    folder = Path(folder)
+    if folder.exists():
+        if not folder.is_dir():
+            raise OutputError(f"{folder}: a folder to write into expected; found a file")
+        if any(folder.iterdir()) and not overwrite:
+            raise OutputError(f"{folder}: an empty or new folder expected; found a non-empty "
+                              f"folder ({how} to replace it)")
+    return folder

@@ -1,13 +1,13 @@
 """Imports needed after the sampler, done beside it; a process that draws figures.
 
 ArviZ (R̂ and ESS, ``posterior.nc``) and Matplotlib with the plotting code (the
-CLI's figures) take about 4 s of Python to import on a 2-core machine, and are
-needed only once the draws exist. NUTS's compiled loops do not hold the
+CLI's figures) take seconds of Python to import, and are needed only once the
+draws exist. NUTS's compiled loops do not hold the
 interpreter, so :func:`start`, called by the sampler once its first compiled
 chunk is dispatched, imports them beside it. Not sooner: beside a Python loop
-that calls small compiled programs (the Laplace covariance's 243 gradients on
-the rig) the import thread holds the interpreter for up to the switch interval
-(5 ms) at each of the loop's calls, and the loop took 1.3 s instead of 0.15 s.
+that calls small compiled programs (the Laplace covariance's gradients) the
+import thread holds the interpreter for up to the switch interval at each of the
+loop's calls, which slows the loop several times over.
 A module wanted sooner is imported by whichever thread asks first: Python's
 import lock makes the other wait for it.
 """

@@ -18,11 +18,23 @@ __all__ = ["ensure_x64"]
 def ensure_x64() -> None:
     """Turn on JAX's float64 mode (``jax_enable_x64``) if it is off; otherwise do nothing.
 
-    JAX is imported here, not with bayeshopf: the CLI's figure process imports
-    the plotting code only, and JAX's import (1.1 s) would take that time from
-    the fit beside it.
+    The first call also gives JAX its CPU settings
+    (:func:`bayeshopf._xla.configure_xla_cpu`), which take effect only before
+    JAX's first computation in the process: every computing function of
+    bayeshopf calls this first, so user code need not. JAX is imported here,
+    not with bayeshopf, so that a process that only draws figures does not
+    import it.
     """
+    if not _CONFIGURED:
+        from bayeshopf._xla import configure_xla_cpu
+
+        configure_xla_cpu()
+        _CONFIGURED.append(True)
     import jax
 
     if not jax.config.jax_enable_x64:
         jax.config.update("jax_enable_x64", True)
+
+
+#: Whether :func:`ensure_x64` has made JAX's CPU settings in this process.
+_CONFIGURED: list[bool] = []

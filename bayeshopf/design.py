@@ -45,15 +45,41 @@ averaged over the diagram's μ grid (both branches) for ``"diagram"``.
 The *gain* of a candidate is the current 90% width of ``T`` less that
 expectation. Only the amplitude enters ``y``: a new recording also carries its
 orbit's shape, which a refit also uses, so a refit may shrink the target more
-than predicted (``benchmarks/design.md`` compares the two). A candidate
-where fewer than ``p_exists_min`` of the draws have the branch is skipped:
-the orbit may not be there to measure.
+than predicted. A candidate is skipped, and never recommended, where fewer
+than ``min_p_exists`` of the draws have the branch (the orbit may not be there
+to measure) or where its predicted median amplitude is below ``min_amplitude``
+(an orbit too small for the rig to hold or resolve).
 Observing the orbit rules out the draws without it, which is why candidates
 near the fold can inform the fold.
 
 The reweighting is trustworthy while the weights do not collapse onto a few
 draws: the table reports each candidate's mean effective sample size
 ``(Σ w)² / Σ w²``.
+
+The expectation over outcomes is an average over ``M`` simulated
+measurements, so the gain carries a Monte Carlo standard error. With
+``v_{mg} = \mathrm{Var}_{w(y_m)}(T_g)``, ``r_g = \bar v_g / \mathrm{Var}(T_g)``
+and ``W_g`` the current width of column ``g`` (one column unless ``"diagram"``),
+the expected width is ``\frac1G \sum_g W_g \sqrt{r_g}``; linearised in the
+outcomes (delta method), each outcome contributes
+
+.. math::
+
+    L_m = \frac{1}{G}\sum_g \frac{W_g}{2\sqrt{r_g}\,\mathrm{Var}(T_g)}\, v_{mg},
+    \qquad \mathrm{se} = \mathrm{sd}_m(L_m) / \sqrt{M}.
+
+It is the error of the outer average only (the draws held fixed), the part
+that a new ``seed`` changes. Since the expected posterior variance cannot
+exceed the current one, the expected width after is clipped at the current
+width and the gain at zero; a gain within :data:`NO_GAIN_SE` standard errors
+of zero is reported as "no gain".
+
+A *resolution* ``δμ`` (the smallest airspeed step the rig sets and holds)
+merges candidates: on one branch, a recommended candidate suppresses every
+other within ``δμ`` of it (the best of each cluster is kept, greedily by
+gain), and for the fold and the Hopf point a gain below ``δμ`` is flagged as
+below the tunnel's resolution: it narrows the interval by less than the rig
+can tell apart.
 """
 
 from __future__ import annotations
@@ -67,12 +93,17 @@ from bayeshopf.errors import FitError
 from bayeshopf.model import collapsed as cm
 from bayeshopf.posterior import N_BAND_DRAWS as N_DRAWS  # the bands' draws, aligned
 
-__all__ = ["Candidate", "DesignResult", "TARGETS", "candidate_grid", "next_measurements"]
+__all__ = ["Candidate", "DesignResult", "NO_GAIN_SE", "TARGETS", "candidate_grid",
+           "next_measurements"]
 
 #: What a design can target: the fold ``μ_SN``, the Hopf point ``μ0``, the diagram's band.
 TARGETS = ("fold", "hopf", "diagram")
 #: Predictive replicates per draw used to estimate the measurement scatter ``τ_s``.
 N_REPLICATES = 16
+#: A gain within this many Monte Carlo standard errors of zero is reported as "no gain".
+NO_GAIN_SE = 2.0
+#: Note of a gain below the resolution in μ.
+BELOW_RESOLUTION = "below the tunnel's resolution"
 
 
 @dataclass(frozen=True)
@@ -88,9 +119,14 @@ class Candidate:
         width_now: The target's current ``ci`` width (μ units; amplitude units
             for ``"diagram"``: the mean band width over the diagram).
         width_after: Its expected width after the measurement (NaN when skipped).
-        gain: ``width_now − width_after`` (NaN when skipped).
+        gain: ``width_now − width_after``, never negative (NaN when skipped).
         ess: Mean effective sample size of the importance weights.
         skipped: Why the candidate was skipped (``""`` when it was not).
+        gain_mcse: Monte Carlo standard error of ``gain`` (NaN when skipped).
+        note: What limits the gain: ``"no gain"`` (within :data:`NO_GAIN_SE`
+            standard errors of zero), :data:`BELOW_RESOLUTION`, or
+            ``"merged into μ = …"`` (within the resolution of a better
+            candidate on its branch); ``""`` otherwise.
     """
 
     mu: float
@@ -102,6 +138,8 @@ class Candidate:
     gain: float
     ess: float
     skipped: str = ""
+    gain_mcse: float = float("nan")
+    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -117,6 +155,11 @@ class DesignResult:
         mu_label: Name of μ.
         mu_units: Unit of μ.
         amplitude_units: Unit of the amplitude.
+        amplitude_label: What the amplitude is (``"peak-to-peak of h"``: the
+            fit's first planar channel).
+        min_p_exists: Share of draws a candidate's branch must exist in.
+        min_amplitude: Smallest predicted amplitude recommended (0: no limit).
+        resolution: Resolution in μ (0: none).
     """
 
     target: str
@@ -127,19 +170,41 @@ class DesignResult:
     mu_label: str = "mu"
     mu_units: str = ""
     amplitude_units: str = ""
+    amplitude_label: str = "peak-to-peak of z1"
+    min_p_exists: float = 0.9
+    min_amplitude: float = 0.0
+    resolution: float = 0.0
+
+    def ranked(self) -> tuple[Candidate, ...]:
+        """Every candidate, best first.
+
+        The recommended by rank, then the rest by gain (highest first), then the
+        skipped in grid order.
+        """
+        rec = {(c.mu, c.branch) for c in self.recommended}
+        rest = [c for c in self.candidates if (c.mu, c.branch) not in rec]
+        ok = sorted((c for c in rest if not c.skipped), key=lambda c: -np.nan_to_num(
+            c.gain, nan=-np.inf))
+        return tuple(self.recommended) + tuple(ok) + tuple(c for c in rest if c.skipped)
 
     def to_dataframe(self):
-        """The candidates as a :class:`pandas.DataFrame` (one row each, ``recommended`` rank)."""
+        """The candidates as a :class:`pandas.DataFrame`, one row each.
+
+        Sorted as :meth:`ranked`: ``rank`` 1…n for the recommended, missing otherwise.
+        """
         import pandas as pd
 
         rank = {(c.mu, c.branch): i + 1 for i, c in enumerate(self.recommended)}
-        rows = [{"mu": c.mu, "branch": c.branch, "p_exists": c.p_exists,
-                 "amplitude": c.amplitude[0], "amplitude_lo": c.amplitude[1],
-                 "amplitude_hi": c.amplitude[2], "width_now": c.width_now,
-                 "width_after": c.width_after, "gain": c.gain, "ess": c.ess,
-                 "skipped": c.skipped, "rank": rank.get((c.mu, c.branch))}
-                for c in self.candidates]
-        return pd.DataFrame(rows)
+        rows = [{"rank": rank.get((c.mu, c.branch)), "mu": c.mu, "branch": c.branch,
+                 "p_exists": c.p_exists, "amplitude": c.amplitude[0],
+                 "amplitude_lo": c.amplitude[1], "amplitude_hi": c.amplitude[2],
+                 "width_now": c.width_now, "width_after": c.width_after, "gain": c.gain,
+                 "gain_mcse": c.gain_mcse, "ess": c.ess, "note": c.note,
+                 "skipped": c.skipped}
+                for c in self.ranked()]
+        df = pd.DataFrame(rows)
+        df["rank"] = df["rank"].astype("Int64")
+        return df
 
     def to_json(self) -> dict:
         """A JSON-ready dict (NaN as ``None``)."""
@@ -149,12 +214,15 @@ class DesignResult:
         def row(c: Candidate) -> dict:
             return {"mu": c.mu, "branch": c.branch, "p_exists": c.p_exists,
                     "amplitude": [fin(a) for a in c.amplitude], "width_now": fin(c.width_now),
-                    "width_after": fin(c.width_after), "gain": fin(c.gain), "ess": fin(c.ess),
+                    "width_after": fin(c.width_after), "gain": fin(c.gain),
+                    "gain_mcse": fin(c.gain_mcse), "ess": fin(c.ess), "note": c.note,
                     "skipped": c.skipped}
 
         return {"target": self.target, "ci": self.ci, "width_now": fin(self.width_now),
                 "mu_label": self.mu_label, "mu_units": self.mu_units,
                 "amplitude_units": self.amplitude_units,
+                "amplitude_label": self.amplitude_label, "min_p_exists": self.min_p_exists,
+                "min_amplitude": self.min_amplitude, "resolution": self.resolution,
                 "recommended": [row(c) for c in self.recommended],
                 "candidates": [row(c) for c in self.candidates]}
 
@@ -181,6 +249,24 @@ def parse_candidates(text: str) -> np.ndarray:
     return lo + step * np.arange(n)
 
 
+def _variances(values: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Current variance ``(G,)`` and each outcome's reweighted variance ``(M, G)``.
+
+    ``values`` ``(S, G)`` (NaN: no branch); ``weights`` ``(M, S)``: one row of
+    normalised importance weights per outcome.
+    """
+    have = np.isfinite(values)
+    x = np.where(have, values, 0.0)
+    h = have.astype(float)
+
+    def var(w):
+        wh = np.maximum(w @ h, 1e-300)
+        mean = (w @ x) / wh
+        return np.maximum((w @ (x * x)) / wh - mean**2, 0.0)
+
+    return var(np.full((1, values.shape[0]), 1.0 / values.shape[0]))[0], var(weights)
+
+
 def _expected_var_ratio(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """``E_m[Var_{w_m}(x)] / Var(x)`` per column of ``values`` ``(S, G)`` (NaN: no branch).
 
@@ -188,16 +274,28 @@ def _expected_var_ratio(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     By the law of total variance the expected posterior variance is below the
     current one; the ratio estimates how much of it a measurement leaves.
     """
-    have = np.isfinite(values)
-    x = np.where(have, values, 0.0)
-    h = have.astype(float)
-    def var(w):
-        wh = np.maximum(w @ h, 1e-300)
-        mean = (w @ x) / wh
-        return np.maximum((w @ (x * x)) / wh - mean**2, 0.0)
-    now = var(np.full((1, values.shape[0]), 1.0 / values.shape[0]))[0]
-    after = var(weights).mean(axis=0)
-    return np.where(now > 0, after / np.where(now > 0, now, 1.0), 1.0)
+    now, v = _variances(values, weights)
+    return np.where(now > 0, v.mean(axis=0) / np.where(now > 0, now, 1.0), 1.0)
+
+
+def _expected_width(values: np.ndarray, widths: np.ndarray,
+                    weights: np.ndarray) -> tuple[float, float]:
+    """Expected mean width after the measurement and its Monte Carlo standard error.
+
+    ``mean_g W_g sqrt(r_g)`` and ``sd_m(L_m)/sqrt(M)`` of the module docstring
+    (delta method over the ``M`` outcomes, the draws held fixed).
+    """
+    now, v = _variances(values, weights)
+    pos = now > 0
+    ratio = np.where(pos, v.mean(axis=0) / np.where(pos, now, 1.0), 1.0)
+    after = float(np.mean(widths * np.sqrt(ratio)))
+    m = v.shape[0]
+    if m < 2:
+        return after, float("nan")
+    slope = np.where(pos & (ratio > 0), widths / (2.0 * np.sqrt(np.maximum(ratio, 1e-300))
+                                                  * np.where(pos, now, 1.0)), 0.0)
+    influence = v @ slope / v.shape[1]                                      # (M,)
+    return after, float(np.std(influence, ddof=1) / np.sqrt(m))
 
 
 def _band_widths(values: np.ndarray, ci: float) -> tuple[np.ndarray, np.ndarray]:
@@ -251,7 +349,8 @@ def _similar_se(fit, amplitude: float) -> np.ndarray:
 
 def next_measurements(fit, *, target: str = "fold", candidates=None,
                       branch: str = "both", n: int = 3, ci: float = CI,
-                      p_exists_min: float = 0.9, seed: int = 0) -> DesignResult:
+                      min_p_exists: float = 0.9, min_amplitude: float = 0.0,
+                      resolution: float = 0.0, seed: int = 0) -> DesignResult:
     """Rank candidate ``(μ, branch)`` measurements by the expected shrinkage of a target.
 
     See the module docstring for the method.
@@ -265,7 +364,14 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
         branch: ``"stable"``, ``"unstable"`` or ``"both"``.
         n: How many to recommend.
         ci: Mass of the intervals (0.9).
-        p_exists_min: Skip a candidate whose branch exists in fewer draws.
+        min_p_exists: Skip a candidate whose branch exists in a smaller share of
+            the draws.
+        min_amplitude: Skip a candidate whose predicted median amplitude (the
+            fit's amplitude units) is below it; 0 (default) skips none.
+        resolution: Resolution in μ (μ units; 0, the default, for none): on one
+            branch, recommended candidates lie more than ``resolution`` apart,
+            and for ``"fold"`` and ``"hopf"`` a gain below it is noted
+            (:data:`BELOW_RESOLUTION`).
         seed: Seed of the simulated measurements.
 
     Returns:
@@ -273,7 +379,8 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
 
     Raises:
         FitError: For an unknown target or branch, a ``"fold"`` target on a fit
-            without a fold (supercritical), or no candidate.
+            without a fold (supercritical), no candidate, or a ``min_p_exists``
+            outside ``[0, 1]``, a negative ``min_amplitude`` or ``resolution``.
     """
     from bayeshopf import posterior as bp
 
@@ -285,9 +392,14 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
         raise FitError(f"ci must lie strictly between 0 and 1; got {ci!r}")
     if n < 1:
         raise FitError(f"n must be at least 1; got {n!r}")
+    if not 0 <= min_p_exists <= 1:
+        raise FitError(f"min_p_exists must lie in [0, 1]; got {min_p_exists!r}")
+    for name, v in (("min_amplitude", min_amplitude), ("resolution", resolution)):
+        if not (np.isfinite(v) and v >= 0):
+            raise FitError(f"{name} must be finite and at least 0; got {v!r}")
     if target == "fold" and "mu_fold" not in fit.samples:
         raise FitError("target 'fold' needs a subcritical fit (this one has no fold); "
-                       "use --target hopf or diagram")
+                       "use target='hopf' or 'diagram'")
     branches = ("stable", "unstable") if branch == "both" else (branch,)
     if fit.criticality == "supercritical":
         branches = tuple(b for b in branches if b == "stable")
@@ -317,10 +429,17 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
             a = amp[:, j]
             have = np.isfinite(a)
             p = float(have.mean())
-            if p < p_exists_min:
+            why = ""
+            if p < min_p_exists or not have.any():
+                why = (f"the {b} branch exists in {100 * p:.0f}% of the draws "
+                       f"(< {100 * min_p_exists:.0f}%)")
+            elif float(np.median(a[have])) < min_amplitude:
+                why = (f"predicted amplitude {float(np.median(a[have])):.4g} "
+                       f"{fit.amplitude_units} below the minimum {min_amplitude:.4g} "
+                       f"{fit.amplitude_units}").replace("  ", " ")
+            if why:
                 rows.append(Candidate(float(m), b, p, (np.nan,) * 3, width_now, np.nan, np.nan,
-                                      np.nan, f"the {b} branch exists in {100 * p:.0f}% of the "
-                                      f"draws (< {100 * p_exists_min:.0f}%)"))
+                                      np.nan, why))
                 continue
             se = _similar_se(fit, float(np.median(a[have])))
             reps = _replicates(fit, coeffs[:, j:j + 1], float(m), b, se, rng)   # (S, R)
@@ -336,13 +455,20 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
             w = np.exp(logw - logw.max(axis=1, keepdims=True))
             w /= w.sum(axis=1, keepdims=True)
             ess = float(np.mean(1.0 / np.sum(w**2, axis=1)))
-            after = float(np.mean(widths * np.sqrt(_expected_var_ratio(values, w))))
+            after, mcse = _expected_width(values, widths, w)
+            after = min(after, width_now)          # E[Var after] <= Var now: clip the noise
+            gain = width_now - after
+            note = ("no gain" if not gain > NO_GAIN_SE * mcse
+                    else BELOW_RESOLUTION if target != "diagram" and gain < resolution else "")
             rows.append(Candidate(float(m), b, p, (float(q[0]), float(q[1]), float(q[2])),
-                                  width_now, after, width_now - after, ess))
+                                  width_now, after, gain, ess, "", mcse, note))
     if not rows:
         raise FitError("no candidate to rank")
-    return DesignResult(target, tuple(rows), _recommend(rows, n, mu), width_now, ci,
-                        fit.mu_label, fit.mu_units, fit.amplitude_units)
+    rows, recommended = _recommend(rows, n, mu, resolution)
+    return DesignResult(target, tuple(rows), recommended, width_now, ci,
+                        fit.mu_label, fit.mu_units, fit.amplitude_units,
+                        f"peak-to-peak of {fit.spec.frame.names[0]}", float(min_p_exists),
+                        float(min_amplitude), float(resolution))
 
 
 def fit_branches(fit) -> tuple[str, ...]:
@@ -350,15 +476,32 @@ def fit_branches(fit) -> tuple[str, ...]:
     return ("stable", "unstable") if fit.criticality == "subcritical" else ("stable",)
 
 
-def _recommend(rows: list[Candidate], n: int, mu: np.ndarray) -> tuple[Candidate, ...]:
-    """The ``n`` best by gain; on one branch, at least two grid steps apart."""
-    step = float(np.min(np.diff(np.unique(mu)))) if np.unique(mu).size > 1 else 0.0
-    ok = sorted((c for c in rows if not c.skipped and np.isfinite(c.gain)),
-                key=lambda c: -c.gain)
-    out: list[Candidate] = []
-    for c in ok:
-        if all(o.branch != c.branch or abs(o.mu - c.mu) >= 2 * step - 1e-12 for o in out):
-            out.append(c)
-        if len(out) == n:
-            break
-    return tuple(out)
+def _recommend(rows: list[Candidate], n: int, mu: np.ndarray,
+               resolution: float = 0.0) -> tuple[list[Candidate], tuple[Candidate, ...]]:
+    """The ``n`` best by gain, and the rows with the merged ones noted.
+
+    On one branch, the kept candidates lie at least two grid steps apart and
+    more than ``resolution`` apart: greedily by gain, each kept candidate
+    suppresses the others within that distance (noted ``"merged into μ = …"``
+    when the distance is within ``resolution``).
+    """
+    from dataclasses import replace
+
+    u = np.unique(mu)
+    step = float(np.min(np.diff(u))) if u.size > 1 else 0.0
+    ok = sorted((i for i, c in enumerate(rows) if not c.skipped and np.isfinite(c.gain)),
+                key=lambda i: -rows[i].gain)
+    rows = list(rows)
+    kept: list[int] = []
+    for i in ok:
+        c = rows[i]
+        near = [rows[k] for k in kept if rows[k].branch == c.branch
+                and abs(rows[k].mu - c.mu) <= resolution + 1e-12]
+        if near:
+            rows[i] = replace(c, note="; ".join(
+                x for x in (c.note, f"merged into μ = {near[0].mu:.6g}") if x))
+            continue
+        if len(kept) < n and all(rows[k].branch != c.branch
+                                 or abs(rows[k].mu - c.mu) >= 2 * step - 1e-12 for k in kept):
+            kept.append(i)
+    return rows, tuple(rows[k] for k in kept)

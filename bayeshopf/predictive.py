@@ -7,7 +7,7 @@ harmonic coefficients at any μ (:func:`orbit_coefficients`), the model
 discrepancy there (:func:`discrepancy_draws`), the noise of a new recording
 (:func:`noise_sd`), amplitudes (:func:`amplitude_of`) and frequencies
 (:func:`frequency_draws`). :class:`~bayeshopf.posterior.HybridPosterior`, saved
-fits (:mod:`bayeshopf.report`), leave-one-out (:mod:`bayeshopf.validation`) and
+fits (:mod:`bayeshopf.fit_folder`), leave-one-out (:mod:`bayeshopf.validation`) and
 ``next`` (:mod:`bayeshopf.design`) call them.
 """
 
@@ -49,8 +49,7 @@ def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCA
     :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
     :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
     measurement's band averages over whether the fit misses the orbits' sizes.
-    Both constants were set from simulated rigs' held-out residuals
-    (``docs/inference_core.md``, "The class with missing physics"); the model
+    Both constants were set from simulated rigs' held-out residuals; the model
     discrepancy (:mod:`bayeshopf.model.discrepancy`) is to replace the rule.
 
     Args:
@@ -79,7 +78,7 @@ def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
 
 
 def _spec_key(spec: cm.CollapsedSpec) -> str:
-    """What the orbit and frequency programs close over: the spec, as JSON (0.1 ms)."""
+    """What the orbit and frequency programs close over: the spec, as JSON."""
     return json.dumps(spec.to_dict(), sort_keys=True)
 
 

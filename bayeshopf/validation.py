@@ -96,7 +96,7 @@ class HeldOut:
         base_log_var: Variance of that log amplitude (``nan`` for a plug-in).
         away_sd: The unit process's sd ``c`` at μ (module docstring; ``nan`` for a plug-in).
         draws: The predictive amplitude draws where the branch exists (for
-            :meth:`Fold.log_density`).
+            :meth:`HeldOutFold.log_density`).
     """
 
     median: float
@@ -112,8 +112,8 @@ class HeldOut:
 
 
 @dataclass(frozen=True)
-class Fold:
-    """One leave-one-out fold.
+class HeldOutFold:
+    """One leave-one-out fold: a recording held out and what the others' fit predicts for it.
 
     Attributes:
         name: Held-out recording.
@@ -166,16 +166,18 @@ class Fold:
         return float(np.log(self.measured) - self.predictions[method].base_log_median)
 
 
+
+
 @dataclass(frozen=True)
 class LeaveOneOut:
     """All folds.
 
     Attributes:
-        folds: One :class:`Fold` per held-out recording.
+        folds: One :class:`HeldOutFold` per held-out recording.
         methods: Methods compared.
     """
 
-    folds: tuple[Fold, ...]
+    folds: tuple[HeldOutFold, ...]
     methods: tuple[str, ...]
 
     @property
@@ -530,11 +532,12 @@ def leave_one_out(
         control = None if held.control is None else held.control[0][None]
         preds = {m: predict_held_out(post, m, mu, branch, held.coeffs_se[0], control)
                  for m in methods}
-        out.append(Fold(name=name, mu=mu, branch=branch, measured=float(features.amplitude[i]),
-                        measured_sd=float(features.amplitude_sd[i]), predictions=preds,
-                        fit=post if keep_fits else None,
-                        extrapolation_scale=post.extrapolation_scale
-                        if settings.extrapolation else 0.0))
+        out.append(HeldOutFold(name=name, mu=mu, branch=branch,
+                               measured=float(features.amplitude[i]),
+                               measured_sd=float(features.amplitude_sd[i]), predictions=preds,
+                               fit=post if keep_fits else None,
+                               extrapolation_scale=post.extrapolation_scale
+                               if settings.extrapolation else 0.0))
     return LeaveOneOut(folds=tuple(out), methods=methods)
 
 

@@ -1,4 +1,9 @@
-"""Helpers shared by the benchmark scripts (atomic writes, the rig's recordings)."""
+"""Helpers shared by the benchmark scripts (atomic writes, the rig's recordings).
+
+Importing this module puts the repository's ``tests/`` folder on ``sys.path`` once, so
+that the scripts import the test bed (``from testbed import independent_effects``) by
+the same name as the tests do.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,10 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+
+_TESTS = str(Path(__file__).resolve().parents[1] / "tests")
+if _TESTS not in sys.path:
+    sys.path.insert(0, _TESTS)
 
 #: Where runs that no document quotes go (per-label, per-setting copies); ignored by git.
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
@@ -32,3 +41,16 @@ def rig_recordings():
         print(f"benchmark: the recordings are not at {CBC_DIR}", file=sys.stderr)
         return None
     return datasets.flutter_cbc(CBC_DIR)
+
+
+def exit_on_help(doc: str | None, argv: list[str] | None = None) -> None:
+    """Print the script's docstring and exit 0 when ``-h`` or ``--help`` is an argument.
+
+    Every script calls this first, so that ``python benchmarks/SCRIPT.py --help``
+    imports the script (and with it the package names it uses at the top) and
+    says how to run it, without starting a measurement.
+    """
+    args = sys.argv[1:] if argv is None else argv
+    if "-h" in args or "--help" in args:
+        print((doc or "").strip())
+        raise SystemExit(0)

@@ -7,13 +7,12 @@ For each seed, ``flutter_experiment(seed)`` (4 stable + 4 unstable recordings,
 one segment each) is fitted with the default settings, and the 90% intervals of
 μ0 and μ_fold are checked against the simulator's values, the 7 held-out orbits
 (``FLUTTER_HELD_OUT``) against their 90% predictive bands. One JSON file per seed
-goes to ``benchmarks/calibration_collapsed/`` (partial runs keep what finished);
-``--summary`` prints the table of every file there. ``--target-accept P`` fits with
-NUTS's target acceptance ``P`` instead of the default and writes to
-``benchmarks/results/calibration_collapsed_ta<P>/`` (an ignored folder);
-``--summary --target-accept P`` reads that folder, or, where it is absent, the
-stored ``benchmarks/calibration_collapsed_ta<P>/`` (P = 0.9, which
-``docs/inference_core.md`` quotes).
+goes to the ignored ``benchmarks/results/calibration_collapsed/`` (partial runs keep
+what finished); ``--summary`` prints the table of every file there and writes it to
+``benchmarks/calibration_collapsed.md`` (the one table the documents quote).
+``--target-accept P`` fits with NUTS's target acceptance ``P`` instead of the default
+and writes to ``benchmarks/results/calibration_collapsed_ta<P>/``;
+``--summary --target-accept P`` prints that folder's table (written nowhere).
 
 No setting of the core was chosen on seeds 100–119 (the settings came from the
 rig and seed 0).
@@ -25,9 +24,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import RESULTS_DIR
+from _common import RESULTS_DIR, atomic_write
 
-OUT = Path(__file__).parent / "calibration_collapsed"
+OUT = RESULTS_DIR / "calibration_collapsed"
+TABLE = Path(__file__).parent / "calibration_collapsed.md"
 
 
 def one(seed: int, short: bool, target_accept: float | None = None) -> dict:
@@ -69,37 +69,41 @@ def one(seed: int, short: bool, target_accept: float | None = None) -> dict:
     return res
 
 
-def summary(short: bool, out: Path = OUT) -> None:
+def summary(short: bool, out: Path = OUT) -> list[str]:
+    """The table's lines for the long (or, ``short``, the 2 s) records in ``out``."""
+    lines: list[str] = []
     rows = [json.loads(p.read_text()) for p in sorted(out.glob("seed_*.json"))]
     rows = [r for r in rows if r["short"] == short]
     if not rows:
-        print("no results")
-        return
+        return lines
     n = len(rows)
-    print(f"{'records 2 s at 1 kHz' if short else 'records 20 s at 500 Hz'}: {n} seeds "
+    lines.append(f"{'records 2 s at 1 kHz' if short else 'records 20 s at 500 Hz'}: {n} seeds "
           f"({rows[0]['seed']}–{rows[-1]['seed']})")
     for k in ("mu0", "mu_fold"):
         inside = sum(r[k]["inside"] for r in rows)
         width = np.median([r[k]["hi"] - r[k]["lo"] for r in rows])
         spread = np.std([r[k]["median"] for r in rows], ddof=1)
         bias = np.mean([r[k]["median"] - r[k]["true"] for r in rows])
-        print(f"- {k}: truth inside the 90% interval in {inside}/{n}; median width "
+        lines.append(f"- {k}: truth inside the 90% interval in {inside}/{n}; median width "
               f"{width:.4g}, seed-to-seed sd of the median {spread:.4g}, mean error {bias:+.4g}")
     ho = [h["inside"] for r in rows for h in r["held_out"]]
-    print(f"- held-out orbits inside their 90% predictive bands: {sum(ho)}/{len(ho)} "
+    lines.append(f"- held-out orbits inside their 90% predictive bands: {sum(ho)}/{len(ho)} "
           f"({100 * np.mean(ho):.0f}%)")
     fr = [x for r in rows for x in r.get("frequency_inside", [])]
     if fr:
-        print(f"- training frequencies inside their 90% predictive bands: {sum(fr)}/{len(fr)}")
-    print(f"- orbit errors: max {100 * max(max(r['orbit_error']) for r in rows):.2f}%")
-    print(f"- NUTS converged (R̂ ≤ 1.01, ESS ≥ 400) in {sum(r['converged'] for r in rows)}/{n}; "
-          f"median wall {np.median([r['wall_s'] for r in rows]):.0f} s per fit")
+        lines.append("- training frequencies inside their 90% predictive bands: "
+                     f"{sum(fr)}/{len(fr)}")
+    lines.append(f"- orbit errors: max {100 * max(max(r['orbit_error']) for r in rows):.2f}%")
+    converged = sum(r["converged"] for r in rows)
+    lines.append(f"- NUTS converged (R̂ ≤ 1.01, ESS ≥ 400) in {converged}/{n}; "
+                 f"median wall {np.median([r['wall_s'] for r in rows]):.0f} s per fit")
     draws = [r.get("draws_per_chain") for r in rows]
     if all(d is not None for d in draws):
         longer = [f"{r['seed']}: {r['draws_per_chain']}" for r in rows
                   if r["draws_per_chain"] > min(draws)]
-        print(f"- draws per chain: {min(draws)} in {draws.count(min(draws))}/{n}"
-              + (f"; extended: {', '.join(longer)}" if longer else ""))
+        lines.append(f"- draws per chain: {min(draws)} in {draws.count(min(draws))}/{n}"
+                     + (f"; extended: {', '.join(longer)}" if longer else ""))
+    return lines
 
 
 def main(argv):
@@ -110,8 +114,14 @@ def main(argv):
     ta = float(argv[argv.index("--target-accept") + 1]) if "--target-accept" in argv else None
     out = OUT if ta is None else RESULTS_DIR / f"{OUT.name}_ta{ta:g}"
     if "--summary" in argv:
-        stored = OUT.with_name(f"{OUT.name}_ta{ta:g}") if ta is not None else OUT
-        summary(short, out if out.is_dir() or not stored.is_dir() else stored)
+        lines = summary(short, out)
+        print("\n".join(lines) or f"no results in {out}")
+        if ta is None and lines:
+            tables = [summary(s, out) for s in (False, True)]
+            atomic_write(TABLE, "# Calibration of the collapsed core over noise seeds\n\n"
+                         "Written by `python benchmarks/bench_calibration_collapsed.py "
+                         "--summary` (3-DOF aerofoil, default settings).\n\n"
+                         + "\n\n".join("\n".join(t) for t in tables if t) + "\n")
         return
     first, last = int(argv[0]), int(argv[1])
     out.mkdir(parents=True, exist_ok=True)
@@ -124,4 +134,7 @@ def main(argv):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1:])

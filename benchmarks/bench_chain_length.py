@@ -91,5 +91,8 @@ def main(seeds):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     args = sys.argv[1:]
     main([int(a) for a in args[args.index("--seeds") + 1:]] if "--seeds" in args else [1, 2, 3, 4])

@@ -9,7 +9,7 @@ cache the cold run filled. Prints a Markdown table and writes
 and the machine's CPU count and load before each run. ``--fusion-emitters`` runs
 with XLA's CPU fusion emitters, which ``inference.cache.configure_xla_cpu`` turns
 off by default (``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true``), and writes
-``benchmarks/cli_speed_fusion_emitters.json``. ``--label L`` writes
+``benchmarks/results/cli_speed_fusion_emitters.json``. ``--label L`` writes
 ``benchmarks/results/cli_speed_L.json`` instead (an ignored folder: labelled rounds
 are per-run copies; ``--out FILE`` names the file, e.g. one that a document
 quotes): with ``PYTHONPATH`` naming a checkout of
@@ -59,8 +59,9 @@ def main(repeat=1, fusion_emitters=False, label=None, out=None):
         rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache, flags)})
         rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache, flags)})
         rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()), flags)})
-    name = "cli_speed_fusion_emitters" if fusion_emitters else "cli_speed"
-    path = RESULTS_DIR / f"cli_speed_{label}.json" if label else HERE / f"{name}.json"
+    path = (RESULTS_DIR / f"cli_speed_{label}.json" if label else
+            RESULTS_DIR / "cli_speed_fusion_emitters.json" if fusion_emitters else
+            HERE / "cli_speed.json")
     path = Path(out) if out else path
     path.parent.mkdir(parents=True, exist_ok=True)
     code = os.environ.get("PYTHONPATH") or str(HERE.parent)
@@ -73,6 +74,9 @@ def main(repeat=1, fusion_emitters=False, label=None, out=None):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
          fusion_emitters="--fusion-emitters" in sys.argv,
          label=sys.argv[sys.argv.index("--label") + 1] if "--label" in sys.argv else None,

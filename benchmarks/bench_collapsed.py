@@ -83,4 +83,7 @@ def main(which="both"):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1] if len(sys.argv) > 1 else "both")

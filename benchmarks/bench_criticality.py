@@ -9,7 +9,7 @@ ArviZ ``reloo``). Reports each model's pointwise ELPD, the Pareto k, which
 recordings were refitted and the difference with its standard error. Writes
 ``benchmarks/criticality.md`` and ``criticality.json`` (``--psis-only``: the
 PSIS comparison alone; ``--fast``: ``CollapsedSettings.fast()``, written to
-``criticality_fast.*``).
+``results/criticality_fast.*``).
 
     .venv/bin/python benchmarks/bench_criticality.py [--psis-only] [--fast]
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import atomic_write, rig_recordings  # noqa: E402
+from _common import RESULTS_DIR, atomic_write, rig_recordings  # noqa: E402
 
 from bayeshopf.inference.cache import configure_xla_cpu  # noqa: E402
 
@@ -86,13 +86,16 @@ def main() -> int:
     rows = {"psis": _row(psis), "exact": None if exact is None else _row(exact),
             "seconds": seconds, "settings": "fast" if fast else "default",
             "recordings": list(rs.names)}
-    stem = "criticality_fast" if fast else "criticality"
-    atomic_write(HERE / f"{stem}.json", json.dumps(rows, indent=1))
+    stem = RESULTS_DIR / "criticality_fast" if fast else HERE / "criticality"
+    atomic_write(stem.with_suffix(".json"), json.dumps(rows, indent=1))
     md = markdown(psis, exact, rs.names, seconds, fast)
-    atomic_write(HERE / f"{stem}.md", md)
+    atomic_write(stem.with_suffix(".md"), md)
     print(md)
     return 0
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     raise SystemExit(main())

@@ -1,4 +1,4 @@
-"""Simulated CBC campaigns: where ``next`` recommends, against a sweep and random points.
+"""Simulated CBC campaigns: where ``next`` recommends, against a descent, a sweep and random points.
 
 On the 3-DOF aerofoil (``flutter3dof``: Hopf 18.2747 m/s, fold 14.9362 m/s),
 each campaign starts from 2 stable and 2 unstable recordings (:data:`START`)
@@ -9,7 +9,12 @@ and adds 4 recordings one at a time:
 * ``sweep``: 4 points evenly spaced inside the initial fit's candidate range
   (the range the design searches, ends left out), branches alternating from
   the unstable one;
-* ``random``: μ uniform over the same range, branch at random.
+* ``random``: μ uniform over the same range, branch at random;
+* ``descent``: what an experimenter does without the model: step down from
+  the lowest recording by a fixed ``Δμ`` (:data:`DELTA_MU`, ``--delta-mu``),
+  branches alternating from the unstable one; a step that finds no orbit
+  halves ``Δμ`` for the next one (the orbit was lost below the fold, so the
+  next attempt goes half as far down from the lowest recording).
 
 A point where the simulator has no orbit on that branch is a failed attempt:
 it costs a recording and adds nothing (CBC would not find the orbit either).
@@ -18,8 +23,11 @@ After each addition the model is refitted (NUTS, :data:`SETTINGS`), and the
 are recorded. Noise seeds 100–109 (the design was developed on seed 0 of the
 demo set only; nothing was tuned on these seeds).
 
-Usage: ``python benchmarks/bench_design.py [--seeds 100:110] [--steps 4]``;
-writes ``benchmarks/design.json`` and ``benchmarks/design.md``.
+Usage: ``python benchmarks/bench_design.py [--seeds 100:110] [--steps 4]
+[--strategies design,descent] [--delta-mu 0.3]``; writes
+``benchmarks/design.json`` and ``benchmarks/design.md``. ``--smoke`` runs the
+smallest comparison (seed 100, 2 steps, design against descent; 5 fits) and
+writes it to the temporary folder unless ``--out`` is given.
 """
 
 from __future__ import annotations
@@ -37,7 +45,9 @@ from _common import atomic_write  # noqa: E402
 
 OUT = Path(__file__).parent
 START = ((16.0, "stable"), (17.4, "stable"), (16.4, "unstable"), (17.4, "unstable"))
-STRATEGIES = ("design", "sweep", "random")
+STRATEGIES = ("design", "sweep", "random", "descent")
+#: The descent's step down from the lowest recording (m/s), as in issue 52's campaign.
+DELTA_MU = 0.3
 NOISE = 0.01
 DURATION_S, RATE_HZ = 10.0, 500.0
 
@@ -75,7 +85,13 @@ def _record(truth, mu: float, branch: str, seed: int):
         return None
 
 
-def campaign(seed: int, steps: int = 4, strategies=STRATEGIES) -> dict:
+def descent_point(lowest: float, delta: float, k: int) -> tuple[float, str]:
+    """The descent's ``k``-th point (0-based): ``lowest − delta``, unstable on even ``k``."""
+    return float(lowest - delta), "unstable" if k % 2 == 0 else "stable"
+
+
+def campaign(seed: int, steps: int = 4, strategies=STRATEGIES,
+             delta_mu: float = DELTA_MU) -> dict:
     """One noise seed: the start fit, then each strategy's campaign."""
     from bayeshopf.data.recording import RecordingSet
     from bayeshopf.design import candidate_grid, next_measurements
@@ -88,7 +104,8 @@ def campaign(seed: int, steps: int = 4, strategies=STRATEGIES) -> dict:
     fit0 = _fit(rs0)
     grid = candidate_grid(fit0)
     lo, hi = float(grid[0]), float(grid[-1])
-    res = {"seed": seed, "truth": {"mu_fold": truth.mu_fold, "mu0": truth.mu0},
+    res = {"seed": seed, "delta_mu": delta_mu,
+           "truth": {"mu_fold": truth.mu_fold, "mu0": truth.mu0},
            "range": [lo, hi], "start": _state(fit0, truth), "strategies": {}}
     rng = np.random.default_rng([seed, 7])
     sweep = [(float(m), "unstable" if i % 2 == 0 else "stable")
@@ -97,6 +114,7 @@ def campaign(seed: int, steps: int = 4, strategies=STRATEGIES) -> dict:
                for _ in range(steps)]
     for strategy in strategies:
         recs, fit, history = list(rs0), fit0, []
+        lowest, delta = min(m for m, _ in START), delta_mu
         for k in range(steps):
             predicted = None
             if strategy == "design":
@@ -107,9 +125,13 @@ def campaign(seed: int, steps: int = 4, strategies=STRATEGIES) -> dict:
                     continue
                 c = d.recommended[0]
                 point, predicted = (c.mu, c.branch), c.width_after
+            elif strategy == "descent":
+                point = descent_point(lowest, delta, k)
             else:
                 point = (sweep if strategy == "sweep" else randoms)[k]
             rec = _record(truth, point[0], point[1], seed=10_000 * seed + 100 * k + 1)
+            if strategy == "descent":
+                lowest, delta = (point[0], delta) if rec is not None else (lowest, delta / 2)
             if rec is not None:
                 recs.append(rec)
                 fit = _fit(RecordingSet(tuple(recs), rs0.planar, rs0.mu_label, rs0.mu_units))
@@ -153,12 +175,14 @@ def _summary(results: list[dict], steps: int) -> tuple[dict, str]:
                          f"{max(wf):.3f}] | {row['fold_inside']}/{n} | "
                          f"{row['hopf_width_median']:.3f} [{min(wh):.3f}, {max(wh):.3f}] | "
                          f"{row['hopf_inside']}/{n} | {row['not_found']} |")
-    if "design" in table and "sweep" in table:
-        final = table["sweep"][-1]["fold_width_median"]
+    for base in ("sweep", "descent"):
+        if "design" not in table or base not in table:
+            continue
+        final = table[base][-1]["fold_width_median"]
         need = next((r["step"] for r in table["design"] if r["fold_width_median"] <= final), None)
-        table["recordings_to_reach_sweep_final_fold_width"] = need
+        table[f"recordings_to_reach_{base}_final_fold_width"] = need
         lines.append("")
-        lines.append(f"Design recordings needed to reach the sweep's final median fold width "
+        lines.append(f"Design recordings needed to reach the {base}'s final median fold width "
                      f"({final:.3f} m/s after {steps}): "
                      f"{need if need is not None else f'not reached in {steps}'}.")
     return table, "\n".join(lines)
@@ -166,15 +190,37 @@ def _summary(results: list[dict], steps: int) -> tuple[dict, str]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="100:110", help="A:B, noise seeds A..B-1")
-    ap.add_argument("--steps", type=int, default=4)
-    ap.add_argument("--out", default=str(OUT / "design"), help="output stem (.json, .md)")
+    ap.add_argument("--seeds", default=None, help="A:B, noise seeds A..B-1 (default 100:110)")
+    ap.add_argument("--steps", type=int, default=None, help="recordings added (default 4)")
+    ap.add_argument("--strategies", default=None,
+                    help=f"comma-separated subset of {','.join(STRATEGIES)} (default all)")
+    ap.add_argument("--delta-mu", type=float, default=DELTA_MU,
+                    help=f"the descent's step down in μ, m/s (default {DELTA_MU})")
+    ap.add_argument("--smoke", action="store_true",
+                    help="the smallest comparison: seed 100, 2 steps, design against descent "
+                    "(5 NUTS fits, a few minutes); written to the temporary folder unless "
+                    "--out is given")
+    ap.add_argument("--out", default=None, help="output stem (.json, .md; default "
+                    "benchmarks/design)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the campaigns already in the output's .json and run only the "
                          "seeds it lacks")
     args = ap.parse_args(argv)
+    import tempfile
+
     from bayeshopf.inference.cache import configure_xla_cpu
 
+    smoke = {"seeds": "100:101", "steps": 2, "strategies": "design,descent",
+             "out": str(Path(tempfile.gettempdir()) / "bench_design_smoke")} if args.smoke else {}
+    args.seeds = args.seeds or smoke.get("seeds", "100:110")
+    args.steps = args.steps or smoke.get("steps", 4)
+    args.out = args.out or smoke.get("out", str(OUT / "design"))
+    strategies = tuple((args.strategies or smoke.get("strategies", ",".join(STRATEGIES)))
+                       .split(","))
+    unknown = [x for x in strategies if x not in STRATEGIES]
+    if unknown:
+        ap.error(f"--strategies: one of {', '.join(STRATEGIES)} expected; found "
+                 f"{', '.join(unknown)}")
     configure_xla_cpu()
     a, b = (int(x) for x in args.seeds.split(":"))
     results = []
@@ -186,14 +232,15 @@ def main(argv=None) -> int:
     for seed in range(a, b):
         if seed in done:
             continue
-        results.append(campaign(seed, args.steps))
+        results.append(campaign(seed, args.steps, strategies, args.delta_mu))
         results.sort(key=lambda r: r["seed"])
         table, md = _summary(results, args.steps)
         atomic_write(stem.with_suffix(".json"), json.dumps(
             {"settings": {"start": START, "noise": NOISE, "duration_s": DURATION_S,
                           "sample_rate_hz": RATE_HZ, "steps": args.steps,
                           "nuts": "2 chains x (250 warm-up + 300 draws), max tree depth 8",
-                          "design_target": "fold"},
+                          "design_target": "fold", "strategies": list(strategies),
+                          "delta_mu": args.delta_mu},
              "summary": table, "results": results}, indent=1))
         atomic_write(stem.with_suffix(".md"), "# Simulated CBC campaigns (bench_design.py)\n\n"
                      + __doc__.split("\n\n")[1] + "\n\n"

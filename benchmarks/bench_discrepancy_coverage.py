@@ -161,4 +161,7 @@ def main(argv):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1:])

@@ -9,7 +9,7 @@ Each set is one seed. Its truth class is drawn uniformly from four:
     :func:`bayeshopf.discrepancy.simulate_with_effect`, its coefficient log-uniform
     between a barely detectable and a clear size (:data:`TERM_SIZES`), plus
     base-parameter errors as in (b) with probability 1/2;
-(d) ``independent effect``: an effect of ``benchmarks/independent_effects.py``
+(d) ``independent effect``: an effect of ``tests/testbed/independent_effects.py``
     (written without the term library) with a size log-uniform over the range that
     changes the LCOs by about 2–10% (:data:`IE_SIZES`), plus base-parameter errors
     with probability 1/2.
@@ -35,9 +35,10 @@ Usage (one core; the study uses seeds 1000 upward, seeds 0–4 are for trials)::
 
     flock /tmp/bh-heavy.lock taskset -c 0 .venv/bin/python \
         benchmarks/bench_discrepancy_reliability.py --seeds 1000:1022 \
-        --out benchmarks/discrepancy_reliability_a.json [--resume]
+        --out benchmarks/results/discrepancy_reliability_a.json [--resume]
     .venv/bin/python benchmarks/bench_discrepancy_reliability.py --table \
-        benchmarks/discrepancy_reliability_a.json benchmarks/discrepancy_reliability_b.json
+        benchmarks/results/discrepancy_reliability_a.json \
+        benchmarks/results/discrepancy_reliability_b.json
     .venv/bin/python benchmarks/bench_discrepancy_reliability.py --measure-sizes
     .venv/bin/python benchmarks/bench_discrepancy_reliability.py --seeds 1000:1045 --draws
 
@@ -73,8 +74,8 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import independent_effects as ie  # noqa: E402
 from _common import RESULTS_DIR, atomic_write  # noqa: E402
+from testbed import independent_effects as ie  # noqa: E402
 
 from bayeshopf.errors import BayesHopfError  # noqa: E402
 
@@ -501,7 +502,7 @@ def markdown(sets: list[dict], sources: list[str]) -> str:
         "changed by ±1–5%), (c) a library term planted with `simulate_with_effect`, "
         "log-uniform between a barely detectable and a clear size, with base-parameter "
         "errors as in (b) with probability 1/2, (d) an independent effect of "
-        "`benchmarks/independent_effects.py` (written without the term library), its size "
+        "`tests/testbed/independent_effects.py` (written without the term library), its size "
         "log-uniform over the range that changes the LCOs by about 2–10%, with "
         "base-parameter errors with probability 1/2. Recordings: 4 stable + 4 unstable "
         "LCOs at U = 15.5, 16, 16.5, 17 m/s, 10 s at 500 Hz, 1.5% RMS noise (seed = the "

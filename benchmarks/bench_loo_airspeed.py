@@ -45,7 +45,7 @@ CI = 0.9
 SIGMAS = (0.0, 0.1 / np.sqrt(12.0), 0.05, 0.1, 0.15, 0.2)
 #: The grid of airspeed shifts (m/s).
 GRID = np.round(np.linspace(-0.6, 0.6, 121), 10)
-LEGACY_WIDTH_MM = 13.6      # the legacy core's mean band width (docs/inference_core.md)
+LEGACY_WIDTH_MM = 13.6      # the legacy core's mean band width (docs/changelog.md)
 
 
 def main():
@@ -109,4 +109,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     raise SystemExit(main())

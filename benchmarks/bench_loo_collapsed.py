@@ -92,4 +92,7 @@ def main(unfolding="curved"):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1] if len(sys.argv) > 1 else "curved")

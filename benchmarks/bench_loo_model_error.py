@@ -41,7 +41,7 @@ import numpy as np
 
 HERE = Path(__file__).parent
 SCALES = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6)
-LEGACY_WIDTH = 0.0136          # m: the legacy core's mean held-out band (docs/inference_core.md)
+LEGACY_WIDTH = 0.0136          # m: the legacy core's mean held-out band (docs/changelog.md)
 CI = 0.9
 
 
@@ -211,6 +211,9 @@ def main(nested=False):
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     if "--nested-bayes" in sys.argv[1:]:
         nested_bayes()
     else:

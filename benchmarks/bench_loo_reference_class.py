@@ -57,7 +57,7 @@ orbit: freeplay and friction break the continuation) are skipped and listed.
 The rule: the package's ``S`` becomes ``max(0.1, S_class, S_effects)``.
 
 **A second draw of that class** (``--effects --second``, seeds 700, 701, …, into
-``loo_reference_class_effects_b.json``; fixed after the first draw's results and
+``results/loo_reference_class_effects_b.json``; fixed after the first draw's results and
 before this one was run). The first draw split in two: the fits that the
 package's relative-model-error check flags (σ_rel above 2%) held 8 of 28
 held-out amplitudes at ``S = 0.1``, the others 55 of 56 (``--in-sample``). The
@@ -66,7 +66,7 @@ unflagged fits, does ``S = 0.1`` hold at least 90% of the held-out amplitudes,
 and are the flagged fits those whose bands miss?
 
 **The package's rule, tested on a third draw** (``--effects --third``, seeds 900,
-901, … into ``loo_reference_class_effects_c.json``; fixed after the first two
+901, … into ``results/loo_reference_class_effects_c.json``; fixed after the first two
 draws and before this one was run). The package's default scale was then chosen
 per posterior draw by that draw's relative model error (a rule since replaced
 by the model discrepancy, ``docs/model_discrepancy.md``): ``S = 0.7`` where σ_rel
@@ -99,16 +99,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _common import atomic_write  # noqa: E402
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 from bench_loo_model_error import SCALES, _band, _ml_scale, _residual  # noqa: E402
 
 HERE = Path(__file__).parent
 OUT = HERE / "loo_reference_class.json"
 OUT_EFFECTS = HERE / "loo_reference_class_effects.json"
 FIRST_SEED_EFFECTS = 500
-OUT_EFFECTS_B = HERE / "loo_reference_class_effects_b.json"
+OUT_EFFECTS_B = RESULTS_DIR / "loo_reference_class_effects_b.json"
 FIRST_SEED_EFFECTS_B = 700
-OUT_EFFECTS_C = HERE / "loo_reference_class_effects_c.json"
+OUT_EFFECTS_C = RESULTS_DIR / "loo_reference_class_effects_c.json"
 FIRST_SEED_EFFECTS_C = 900
 GRID = SCALES + (0.7,)     # with the package's scale for a flagged fit (stop 47)
 CI = 0.9
@@ -133,12 +133,12 @@ def draw_effect(seed):
 
 def with_drawn_effect(system, name, size, kind):
     """``system`` with the effect planted (library terms through the package, the
-    independent ones through ``independent_effects.py``)."""
+    independent ones through ``tests/testbed/independent_effects.py``)."""
     if kind == "library":
         from bayeshopf.discrepancy.effects import with_effect
 
         return with_effect(system, name, size)
-    import independent_effects as ie
+    from testbed import independent_effects as ie
 
     return ie.EFFECTS[name][0](system, size)
 
@@ -371,6 +371,9 @@ def rig():
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     args = sys.argv[1:]
     if "--rig" in args:
         rig()

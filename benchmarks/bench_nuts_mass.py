@@ -22,9 +22,9 @@ def main():
     from numpyro.infer import MCMC, NUTS, init_to_value
 
     from bayeshopf.data import load_recordings
-    from bayeshopf.diagnostics.arviz_io import rhat_ess
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference import collapsed as ci
+    from bayeshopf.inference.nuts import rhat_ess
     from bayeshopf.model import collapsed as cm
 
     f = extract_harmonics(load_recordings(HERE.parent.parent / "shared/data/flutter_cbc"))
@@ -52,4 +52,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main()

@@ -123,4 +123,7 @@ def table(data: str, rows: list) -> None:
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1:])

@@ -189,4 +189,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     sys.exit(main())

@@ -111,6 +111,9 @@ def main(rounds: int = 2) -> None:
 
 
 if __name__ == "__main__":
+    from _common import exit_on_help
+
+    exit_on_help(__doc__)
     if "--child" in sys.argv:
         child()
     else:

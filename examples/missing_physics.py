@@ -8,7 +8,7 @@
    has a cubic damping of 20 N/(m/s)³ that the simulator lacks, with 1.5%
    noise and sensor offsets (`with_params` and `simulate_with_effect`; the
    truth is kept apart).
-2. Runs `bayeshopf.discrepancy.analyse` on the recordings with the plain
+2. Runs `bh.discrepancy.analyse` on the recordings with the plain
    simulator: it is not told either. The analysis calibrates the simulator's
    uncertain parameters, then names what is still missing. Prints the verdict,
    the calibrated parameters, the models and the fit at each stage, and writes
@@ -18,8 +18,8 @@
    there).
 
 Both analyses include the Bayesian hybrid fit of the recordings
-(`bayeshopf.posterior.fit_hybrid` at the default `CollapsedSettings`, a minute
-or two each); its Hopf and fold intervals and its convergence are printed.
+(`bh.fit` at the default `bh.Settings`, a minute or two each); its Hopf
+and fold intervals and its convergence are printed.
 
 ``BAYESHOPF_FAST=1`` skips the Bayesian hybrid fit and the wind-tunnel data
 (a smoke test of the whole flow, a few minutes).
@@ -31,19 +31,8 @@ import os
 import sys
 from pathlib import Path
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-# before the other imports, as the CLI does: JAX's CPU flags apply before its
-# first work (it also limits NumPy's and SciPy's OpenBLAS to one thread)
-configure_xla_cpu()
-
-import jax  # noqa: E402
-
-jax.config.update("jax_enable_x64", True)
-
-from bayeshopf.cli.discrepancy import write_report  # noqa: E402
-from bayeshopf.discrepancy import analyse, simulate_with_effect  # noqa: E402
-from bayeshopf.simulators import get_system  # noqa: E402
+import bayeshopf as bh
+import bayeshopf.cli.discrepancy  # noqa: F401  (loads bh.cli.discrepancy: write_report)
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
 # the truth's Hopf point is at 17.18 m/s (k_h +4%, c0 +3%, c_alpha -5%): record below it
@@ -84,29 +73,27 @@ def show(report) -> None:
 
 
 def main(out: Path) -> None:
-    flutter = get_system("flutter3dof")
+    flutter = bh.simulators.get_system("flutter3dof")
     off = flutter.with_params(k_h=1.04 * flutter.params["k_h"], c0=1.03 * flutter.params["c0"],
                               c_alpha=0.95 * flutter.params["c_alpha"])
-    rs, truth = simulate_with_effect(off.replace(default_plan=tuple(PLAN)), "h_cubic_damping",
-                                     20.0, [m for m, _ in PLAN], [b for _, b in PLAN],
-                                     noise=0.015, offsets={"h": 0.001, "alpha": -0.004},
-                                     duration_s=8.0 if FAST else 20.0, seed=1)
+    rs, truth = bh.discrepancy.simulate_with_effect(
+        off.replace(default_plan=tuple(PLAN)), "h_cubic_damping", 20.0,
+        [m for m, _ in PLAN], [b for _, b in PLAN], noise=0.015,
+        offsets={"h": 0.001, "alpha": -0.004}, duration_s=8.0 if FAST else 20.0, seed=1)
     print(f"hidden: k_h +4%, c0 +3%, c_alpha -5%; {truth['effect']} = {truth['value']:g} "
           f"{truth['units']}\n")
-    report = analyse(rs, flutter, seed=0, hybrid=not FAST, progress=False)
+    report = bh.discrepancy.analyse(rs, flutter, seed=0, hybrid=not FAST, progress=False)
     show(report)
-    write_report(report, out / "blind", force=True)
+    bh.cli.discrepancy.write_report(report, out / "blind", force=True)
     print(f"\nwrote {out / 'blind'}/report.json, report.md, figures/")
 
     data = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", "../shared/data/flutter_cbc"))
     if FAST or not data.is_dir():
         return
-    from bayeshopf.datasets import flutter_cbc
-
     print("\nwind-tunnel recordings (no ground truth):")
-    real = analyse(flutter_cbc(str(data)), flutter, seed=0, hybrid=True)
+    real = bh.discrepancy.analyse(bh.read_recordings(data), flutter, seed=0, hybrid=True)
     show(real)
-    write_report(real, out / "wind_tunnel", force=True)
+    bh.cli.discrepancy.write_report(real, out / "wind_tunnel", force=True)
     print(f"\nwrote {out / 'wind_tunnel'}/report.json, report.md, figures/")
 
 

@@ -3,7 +3,7 @@
 For each system, noisy recordings of its limit cycles are simulated
 (:mod:`bayeshopf.simulators.truth`: 1 % noise, sensor offsets, the unstable
 aerofoil orbits as control-based continuation measures them), the Bayesian
-hybrid model is fitted on the collapsed core, as ``bayeshopf fit`` does (a
+hybrid model is fitted with ``bh.fit``, as ``bayeshopf fit`` does (a
 deterministic start; the paper started μ0 and a2 at their true values), and the
 posterior is checked against the simulator's own answers: the Hopf point, the
 fold, and the amplitude of held-out orbits that the fit never saw.
@@ -17,7 +17,6 @@ the convergence checks then usually warn).
 
 from __future__ import annotations
 
-# ruff: noqa: E402  (configure_xla_cpu runs before the imports that load SciPy and JAX)
 import argparse
 import os
 import sys
@@ -25,31 +24,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-# before the other imports, as the CLI does: JAX's CPU flags apply before its
-# first work (it also limits NumPy's and SciPy's OpenBLAS to one thread)
-configure_xla_cpu()
-
 import bayeshopf as bh
-from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.plotting import plot_phase_portraits, save_figure
-from bayeshopf.plotting.truth import plot_diagram_vs_truth
-from bayeshopf.posterior import fit_hybrid
-from bayeshopf.simulators.truth import (
-    flutter_experiment,
-    held_out_check,
-    held_out_recordings,
-    vanderpol_experiment,
-)
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
-EXPERIMENTS = {"vanderpol": vanderpol_experiment, "flutter3dof": flutter_experiment}
+EXPERIMENTS = {"vanderpol": bh.simulators.truth.vanderpol_experiment,
+               "flutter3dof": bh.simulators.truth.flutter_experiment}
 TITLES = {"vanderpol": "Van der Pol oscillator (paper Section 4.1)",
           "flutter3dof": "3-DOF aeroelastic aerofoil (paper Section 4.2)"}
 
 
-def run(name: str, out: Path, settings: CollapsedSettings) -> dict:
+def run(name: str, out: Path, settings: bh.Settings) -> dict:
     """Simulate, fit, check and draw one example; returns its numbers."""
     rs, truth = EXPERIMENTS[name](seed=0, fast=FAST)
     print(f"== {TITLES[name]}: {len(rs)} recordings "
@@ -57,32 +41,32 @@ def run(name: str, out: Path, settings: CollapsedSettings) -> dict:
           f"{rs.mus.min():g}–{rs.mus.max():g} {rs.mu_units}, {100 * truth.noise:g}% noise, "
           "offsets " + ", ".join(f"{k} {v:+.2g}" for k, v in truth.offsets.items()))
     t0 = time.perf_counter()
-    result = fit_hybrid(rs, truth.criticality, seed=0, settings=settings, progress=False)
+    fit = bh.fit(rs, settings, criticality=truth.criticality, seed=0, progress=False)
     print(f"{truth.criticality} fit in {time.perf_counter() - t0:.0f} s")
-    for w in result.diagnostics["warnings"]:
+    for w in fit.diagnostics.warnings:
         print(f"warning: {w}")
     print()
-    curved = result.spec.unfolding == "curved"
+    curved = fit.spec.unfolding == "curved"
 
     print(f"{'':8s} {'median':>9s} {'90% interval':>22s} {'true':>9s}  inside")
     values = {}
     for q, true in truth.values().items():
         if true is None or (q == "a2" and curved):
             continue
-        iv = result.interval(q)
+        iv = fit.interval(q)
         values[q] = (iv, true)
         print(f"{q:8s} {iv.median:9.4f} [{iv.lo:9.4f}, {iv.hi:9.4f}] {true:9.4f}  "
               f"{'yes' if iv.contains(true) else 'NO'}")
     if truth.criticality == "supercritical":
-        iv = result.interval("a4")
+        iv = fit.interval("a4")
         print(f"a4       {iv.median:9.4f} [{iv.lo:9.4f}, {iv.hi:9.4f}]  (quintic term in the gauge "
               "a2 = -1; its scale is the learnt map's, no true value)")
     if curved:
-        iv, w = result.interval("a2"), result.interval("w_unfold")
+        iv, w = fit.interval("a2"), fit.interval("w_unfold")
         print(f"a2       {iv.median:9.4f} [{iv.lo:9.4f}, {iv.hi:9.4f}]  (cubic coefficient of the "
               f"curved unfolding, w = {w.median:.2f}; not the linear one's 2√(μ0 − μ_SN))")
 
-    rows = held_out_check(result, truth)
+    rows = bh.simulators.truth.held_out_check(fit, truth)
     n_in = sum(r["inside"] for r in rows)
     print(f"\nheld-out orbits (peak-to-peak of {rs.planar[0]}, {rs.units[0] or 'no unit'}), "
           "true against the 90% predictive interval of a new recording:")
@@ -93,12 +77,14 @@ def run(name: str, out: Path, settings: CollapsedSettings) -> dict:
     print(f"held-out: {n_in}/{len(rows)} inside their 90% predictive intervals\n")
 
     figures = {
-        "bifurcation": plot_diagram_vs_truth(result, truth, rows, title=TITLES[name]),
-        "phase_portraits": plot_phase_portraits(result, rs, truth=truth.orbit),
-        "held_out_phase_portraits": plot_phase_portraits(result, held_out_recordings(truth),
-                                                         truth=truth.orbit),
+        "bifurcation": bh.plotting.truth.plot_diagram_vs_truth(fit, truth, rows,
+                                                               title=TITLES[name]),
+        "phase_portraits": bh.plotting.plot_phase_portraits(fit, rs, truth=truth.orbit),
+        "held_out_phase_portraits": bh.plotting.plot_phase_portraits(
+            fit, bh.simulators.truth.held_out_recordings(truth), truth=truth.orbit),
     }
-    paths = [save_figure(fig, out / f"{name}_{key}.png") for key, fig in figures.items()]
+    paths = [bh.plotting.save_figure(fig, out / f"{name}_{key}.png")
+             for key, fig in figures.items()]
     for p in paths:
         print(f"  wrote {p}")
     print()
@@ -112,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bayeshopf-section4-"))
     out.mkdir(parents=True, exist_ok=True)
-    settings = CollapsedSettings.fast() if FAST else CollapsedSettings()
+    settings = bh.Settings.fast() if FAST else bh.Settings()
     print(f"bayeshopf {bh.__version__}: {'fast' if FAST else 'default'} settings\n")
     names = ("vanderpol", "flutter3dof") if args.system == "both" else (args.system,)
     for name in names:

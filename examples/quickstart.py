@@ -2,8 +2,8 @@
 
 Generates synthetic stable and unstable limit-cycle recordings of a planted
 subcritical Hopf system (the flutter-rig-like demo set), fits the Bayesian
-hybrid normal-form model (the collapsed core, as ``bayeshopf fit`` does), prints
-the Hopf point μ0, the cubic coefficient a2 and the fold μ_fold with their 90%
+hybrid normal-form model (``bh.fit``, as ``bayeshopf fit`` does), prints the
+Hopf point μ0, the cubic coefficient a2 and the fold μ_fold with their 90%
 intervals next to the planted values and the convergence checks, predicts the
 LCO amplitude and frequency at a new airspeed, and saves the figures.
 
@@ -16,26 +16,12 @@ checks then usually warn).
 
 from __future__ import annotations
 
-# ruff: noqa: E402  (configure_xla_cpu runs before the imports that load SciPy and JAX)
 import os
 import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
-from bayeshopf.inference.cache import configure_xla_cpu
-
-# before the other imports, as the CLI does: JAX's CPU flags apply before its
-# first work (it also limits NumPy's and SciPy's OpenBLAS to one thread)
-configure_xla_cpu()
-
 import bayeshopf as bh
-from bayeshopf.data.synthetic import demo_system
-from bayeshopf.diagnostics.summaries import interval
-from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.plotting import plot_all
-from bayeshopf.posterior import fit_hybrid
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
 #: A new airspeed (m/s), between the recordings, where both LCO branches exist.
@@ -46,22 +32,22 @@ def main(argv: list[str]) -> int:
     out = Path(argv[1]) if len(argv) > 1 else Path(tempfile.mkdtemp(prefix="bayeshopf-quickstart-"))
 
     # 1. Recordings: 4 stable and 3 unstable LCOs of a system whose truth we know.
-    rs, truth = demo_system(seed=0, fast=FAST)
+    rs, truth = bh.data.synthetic.demo_system(seed=0, fast=FAST)
     print(f"bayeshopf {bh.__version__}: {len(rs)} synthetic recordings "
           f"({int(rs.is_unstable.sum())} unstable), channels {rs.planar}, "
           f"{rs.mu_label} {rs.mus.min():g}–{rs.mus.max():g} {rs.mu_units}")
 
     # 2. Fit: Fourier features -> deterministic start and MAP -> NUTS on the few
     #    nonlinear parameters, the map integrated out exactly.
-    settings = CollapsedSettings.fast() if FAST else CollapsedSettings()
-    post = fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
-    steps = ", ".join(f"{k} {v:.1f} s" for k, v in post.timings.items())
+    settings = bh.Settings.fast() if FAST else bh.Settings()
+    fit = bh.fit(rs, settings, criticality="subcritical", seed=0, progress=False)
+    steps = ", ".join(f"{k} {v:.1f} s" for k, v in fit.timings.items())
     print(f"fitted ({'fast' if FAST else 'default'} settings): {steps}")
-    d = post.diagnostics
+    d = fit.diagnostics.details
     worst = max(v["r_hat"] for v in d["posterior"]["sites"].values())
     print(f"MAP gradient norm {d['map']['grad_norm']:.1e}; NUTS R̂ ≤ {worst:.3f}, "
           f"{d['posterior']['divergences']} divergences")
-    for w in d["warnings"]:
+    for w in fit.diagnostics.warnings:
         print(f"warning: {w}")
     print()
 
@@ -69,26 +55,25 @@ def main(argv: list[str]) -> int:
     true = {"mu0": truth.mu0, "a2": truth.a2, "mu_fold": truth.mu_fold}
     print(f"{'':8s} {'median':>9s} {'90% interval':>22s} {'true':>8s}  inside")
     for name, value in true.items():
-        iv = post.interval(name)
+        iv = fit.interval(name)
         print(f"{name:8s} {iv.median:9.3f} [{iv.lo:9.3f}, {iv.hi:9.3f}] {value:8.3f}  "
               f"{'yes' if iv.contains(value) else 'NO'}")
 
-    # 4. Predict the amplitude (peak-to-peak heave) and frequency at a new airspeed.
+    # 4. Predict the amplitude (peak-to-peak heave) and frequency of the model's
+    #    curve at a new airspeed (predictive=True would describe a new recording).
     print(f"\namplitude at {rs.mu_label} = {NEW_MU:g} {rs.mu_units} "
           f"({rs.units[0]}, peak-to-peak of {rs.planar[0]}):")
     for branch in ("stable", "unstable"):
-        draws = post.amplitude([NEW_MU], branch)[:, 0]
-        iv = interval(draws[np.isfinite(draws)])
-        f = post.frequency([NEW_MU], branch)[:, 0]
-        hz = interval(f[np.isfinite(f)])
-        print(f"  {branch:8s} {iv.median:.4f}  90% [{iv.lo:.4f}, {iv.hi:.4f}]  "
-              f"true {float(truth.amplitude(NEW_MU, branch)):.4f}  "
-              f"(branch exists in {100 * np.isfinite(draws).mean():.0f}% of draws); "
-              f"frequency {hz.median:.4f} Hz [{hz.lo:.4f}, {hz.hi:.4f}]")
+        p = fit.predict([NEW_MU], branch, predictive=False).sel(mu=NEW_MU)
+        print(f"  {branch:8s} {float(p.amplitude):.4f}  90% [{float(p.amplitude_lo):.4f}, "
+              f"{float(p.amplitude_hi):.4f}]  true {float(truth.amplitude(NEW_MU, branch)):.4f}  "
+              f"(branch exists in {100 * float(p.p_exists):.0f}% of draws); "
+              f"frequency {float(p.frequency):.4f} Hz [{float(p.frequency_lo):.4f}, "
+              f"{float(p.frequency_hi):.4f}]")
 
     # 5. Figures: bifurcation diagram with bands, phase portraits, predictive check,
     #    frequency against μ, time series.
-    paths = plot_all(post, rs, out, truth=truth)
+    paths = bh.plotting.plot_all(fit, rs, out, truth=truth)
     print("\nfigures:")
     for p in paths:
         print(f"  {p}")

@@ -54,16 +54,6 @@ def _missing_column(folder: Path) -> str:
     return "planar pair"
 
 
-def _nan_samples(folder: Path) -> str:
-    def nan(h, t):
-        t = t.copy()
-        t[10, 1] = np.nan
-        return h, t
-
-    _rewrite_csv(folder, nan)
-    return "nan"
-
-
 def _non_uniform_time(folder: Path) -> str:
     def jitter(h, t):
         t = t.copy()
@@ -98,7 +88,6 @@ def _unreadable_file(folder: Path) -> str:
 
 CASES = {
     "missing column": _missing_column,
-    "NaN samples": _nan_samples,
     "non-uniform time": _non_uniform_time,
     "unknown branch label": _unknown_branch,
     "single recording": _single_recording,
@@ -133,7 +122,7 @@ def test_console_script_no_traceback(good_data, tmp_path):
     """The installed entry point, in a subprocess: exit code and stderr."""
     data = tmp_path / "data"
     shutil.copytree(good_data, data)
-    _nan_samples(data)
+    _unknown_branch(data)
     exe = Path(sys.executable).with_name("bayeshopf")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "bayeshopf.cli.main"]
     r = subprocess.run(cmd + ["fit", str(data), "--out", str(tmp_path / "o")],
@@ -170,12 +159,12 @@ def test_version(capsys):
 
 @pytest.mark.parametrize("where", ["before", "after"])
 def test_debug_before_or_after_the_subcommand(where, monkeypatch, capsys):
-    from bayeshopf import report
+    from bayeshopf import fit_folder
 
     def broken(folder):
         raise RuntimeError("boom\nsecond line")
 
-    monkeypatch.setattr(report, "load_fit", broken)
+    monkeypatch.setattr(fit_folder, "load_fit", broken)
     argv = ["predict", "somewhere", "--mu", "16"]
     assert main(argv) == 1
     err = capsys.readouterr().err.strip()
@@ -202,7 +191,7 @@ def test_fit_needs_data_or_dataset(argv, found, tmp_path, capsys):
 def test_fit_dataset_downloads_from_the_mirror(user_without_shared, tmp_path, monkeypatch,
                                                capsys):
     """``fit --dataset flutter_cbc`` without ../shared: the rig's 7 recordings, downloaded."""
-    from bayeshopf.cli import main as cli
+    from bayeshopf.cli import fit as cli
     from bayeshopf.errors import FitError
 
     url, served, data_dir = user_without_shared
@@ -212,7 +201,7 @@ def test_fit_dataset_downloads_from_the_mirror(user_without_shared, tmp_path, mo
         seen.update(rs=rs, criticality=criticality, out=out)
         raise FitError("stopped by the test")
 
-    monkeypatch.setattr(cli, "_run_hybrid", stop)
+    monkeypatch.setattr(cli, "run_hybrid", stop)
     out = tmp_path / "rig-fit"
     assert main(["fit", "--dataset", "flutter_cbc", "--out", str(out), "--planar", "alpha",
                  "h"]) == 2
@@ -285,18 +274,20 @@ def test_predict_json_matches_summary(fitted, capsys):
     rec = s["recordings"][0]
     assert main(["predict", str(fitted), "--mu", str(rec["mu"]), "--branch", rec["branch"],
                  "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    assert out["mu"] == rec["mu"] and out["branch"] == rec["branch"]
-    lo, hi = out["amplitude"]["ci90"]
-    assert lo <= out["amplitude"]["median"] <= hi
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["schema_version"] == 1 and doc["command"] == "predict"
+    assert doc["branch"] == rec["branch"] and doc["ci"] == 0.9
+    (out,) = doc["predictions"]
+    assert out["mu"] == rec["mu"] and out["exists"] is True
+    lo, hi = out["amplitude"]["lo"], out["amplitude"]["hi"]
+    assert lo <= out["amplitude"]["median"] <= hi and out["amplitude"]["ci"] == 0.9
     # the curve's band at a training μ is the one in the summary
     assert out["amplitude"]["median"] == pytest.approx(rec["curve"]["median"], rel=1e-6)
     # the collapsed core models the frequency too: its band at a training μ holds a median
     # within 5% of that recording's measured frequency
     assert s["core"] == "collapsed"
-    freq = out["frequency_hz"]
-    lo, hi = freq["ci90"]
-    assert lo <= freq["median"] <= hi, freq
+    freq = out["frequency"]
+    assert freq["lo"] <= freq["median"] <= freq["hi"], freq
     assert freq["median"] == pytest.approx(abs(rec["frequency_hz"]), rel=0.05), (freq, rec)
 
 
@@ -318,17 +309,17 @@ def test_predict_several_mu_table_csv_json(fitted, capsys):
     assert all(r["ci"] == "0.9" and float(r["p_exists"]) > 0.5 for r in rows)
     # each row is the single-μ prediction
     assert main(["predict", str(fitted), "--mu", str(mus[2]), "--json"]) == 0
-    one = json.loads(capsys.readouterr().out)
+    one = json.loads(capsys.readouterr().out)["predictions"][0]
     assert one["amplitude"]["median"] == pytest.approx(amp[2][1], rel=1e-12)
-    # --ci: a narrower interval inside the 90% one; JSON keys follow the level
+    # --ci: a narrower interval inside the 90% one; the same keys, the level in "ci"
     assert main(["predict", str(fitted), "--mu", str(mus[0]), str(mus[1]), "--ci", "0.5",
                  "--json"]) == 0
-    many = json.loads(capsys.readouterr().out)
+    many = json.loads(capsys.readouterr().out)["predictions"]
     assert [m["mu"] for m in many] == pytest.approx(mus[:2])
     for m, a in zip(many, amp, strict=False):
-        lo, hi = m["amplitude"]["ci50"]
+        lo, hi = m["amplitude"]["lo"], m["amplitude"]["hi"]
         assert a[0] < lo <= m["amplitude"]["median"] <= hi < a[2]
-        assert "ci50" in m["frequency_hz"]
+        assert m["amplitude"]["ci"] == m["frequency"]["ci"] == 0.5
     # the table: a header and one line per μ; beyond the Hopf point the unstable branch is "—"
     mu_u = next(r["mu"] for r in s["recordings"] if r["branch"] == "unstable")
     assert main(["predict", str(fitted), "--mu", str(mu_u), str(mu0 + 5), "--branch",
@@ -341,9 +332,9 @@ def test_predict_several_mu_table_csv_json(fitted, capsys):
 def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, monkeypatch,
                                                 capsys):
     """``fit --ci 0.8``: the saved and printed intervals at 80% (the fit itself reused)."""
-    from bayeshopf import posterior, report
+    from bayeshopf import fit_folder, posterior
 
-    post = report.load_fit(fitted).posterior
+    post = fit_folder.load_fit(fitted).posterior
     monkeypatch.setattr(posterior, "fit_hybrid", lambda rs, crit, **kw: post)
     out = tmp_path / "ci80"
     assert main(["fit", str(good_data), "--out", str(out), "--quiet", "--no-figures",
@@ -357,7 +348,7 @@ def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, mon
     printed = capsys.readouterr().out
     assert "80% interval" in printed and "predicted (80%)" in printed
     assert "inside their 80% predictive intervals" in printed
-    # the scale of the model error away from the recordings, per draw by σ_rel (stop 47)
+    # the scale of the model error away from the recordings, per draw by σ_rel
     away = s["diagnostics"]["fit"]["extrapolation_scale"]
     assert away["scale"] == pytest.approx(post.extrapolation_scale, rel=1e-12)
     assert away["p_above_limit"] == pytest.approx(post.p_misfit)
@@ -487,9 +478,9 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
     """``fit --leave-one-out``: the refits get the fit's features, criticality, settings and
     seed; their check joins ``diagnostics`` and warns when the coverage is improbable (the
     fit itself and the refits are replaced here; both are tested in test_validation)."""
-    from bayeshopf import posterior, report, validation
+    from bayeshopf import fit_folder, posterior, validation
 
-    post = report.load_fit(fitted).posterior
+    post = fit_folder.load_fit(fitted).posterior
     monkeypatch.setattr(posterior, "fit_hybrid", lambda rs, crit, **kw: post)
     seen = {}
 
@@ -501,9 +492,10 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
             lo, hi = (0.9 * a, 1.1 * a) if i < n_inside else (1.2 * a, 1.4 * a)
             p = validation.HeldOut(median=0.5 * (lo + hi), lo=lo, hi=hi, p_exists=1.0,
                                    mu_fold=(15.0, 14.9, 15.1), mu0=(18.0, 17.9, 18.1))
-            folds.append(validation.Fold(name=name, mu=float(features.mu[i]), branch="stable",
-                                         measured=a, measured_sd=0.0, predictions={"bayes": p},
-                                         fit=post if kw["keep_fits"] else None))
+            folds.append(validation.HeldOutFold(
+                name=name, mu=float(features.mu[i]), branch="stable", measured=a,
+                measured_sd=0.0, predictions={"bayes": p},
+                fit=post if kw["keep_fits"] else None))
         return validation.LeaveOneOut(folds=tuple(folds), methods=("bayes",))
 
     monkeypatch.setattr(validation, "leave_one_out", refits)

@@ -87,7 +87,7 @@ def test_evidence_with_unbounded_separation_is_written_as_strict_json(tmp_path):
     """An inf separation (single-segment records) becomes null in summary.json, not an error."""
     import json
 
-    from bayeshopf.report import _write_json
+    from bayeshopf.fit_folder import _write_json
 
     path = tmp_path / "summary.json"
     _write_json({"coexisting": [{"separation": float("inf"), "amplitudes": (0.1, 0.2)}],

@@ -7,6 +7,7 @@ import numpy as np
 import pooch
 import pytest
 
+import bayeshopf
 from bayeshopf.data import datasets
 from bayeshopf.data.datasets import FLUTTER_CBC_ENV, FLUTTER_CBC_SHA256, flutter_cbc
 from bayeshopf.errors import DataError
@@ -167,11 +168,11 @@ def test_notebook_loads_the_rig_without_shared(notebook: str, user_without_share
 
     nb = nbformat.read(Path(__file__).parents[1] / "notebooks" / notebook, as_version=4)
     code = "\n".join(c.source for c in nb.cells if c.cell_type == "code").splitlines()
-    lines = [ln.strip() for ln in code if "flutter_cbc(" in ln or ln.startswith("DATA = ")]
+    lines = [ln.strip() for ln in code if "read_recordings(" in ln or ln.startswith("DATA = ")]
     assert len(lines) == 2 and lines[0].startswith("DATA = "), lines
     assert "download=True" in lines[1]
     monkeypatch.chdir(tmp_path)
-    ns = {"os": os, "Path": Path, "flutter_cbc": flutter_cbc}
+    ns = {"os": os, "Path": Path, "bh": bayeshopf}
     served = user_without_shared[1]
     n0 = len(served)
     for line in lines:

@@ -99,7 +99,7 @@ def test_design_on_a_fit_without_unstable_recordings(demo):
 
 
 def test_cli_next(demo, tmp_path, capsys):
-    from bayeshopf.report import save_hybrid
+    from bayeshopf.fit_folder import save_hybrid
 
     out = tmp_path / "fit"
     save_hybrid(demo, out)
@@ -154,3 +154,190 @@ def test_stored_campaign_notebook_has_outputs_of_a_full_run():
     assert "fast mode: False" in run.text
     assert sum(f"step {k}: where to measure next" in run.text for k in range(1, 5)) == 4
     assert run.n_images >= 5
+
+
+# --- issue 52 item 5: only what exists, gains with their Monte Carlo error, resolution, labels
+
+
+def test_expected_width_standard_error_matches_the_spread_over_outcome_sets():
+    """The reported MC error of the expected width against an independent estimate.
+
+    Conjugate Gaussian as above, prior draws held fixed: the sd of the expected
+    width over 300 independent sets of 60 outcomes is the Monte Carlo error the
+    reported standard error (of one set) must estimate.
+    """
+    from bayeshopf.design import _expected_width
+
+    rng = np.random.default_rng(11)
+    x = rng.standard_normal(600)
+    s, m = 0.7, 60
+    afters, ses = [], []
+    for _ in range(300):
+        pick = rng.integers(0, x.size, m)
+        y = x[pick] + s * rng.standard_normal(m)
+        logw = -0.5 * ((y[:, None] - x[None]) / s) ** 2
+        w = np.exp(logw - logw.max(axis=1, keepdims=True))
+        w /= w.sum(axis=1, keepdims=True)
+        a, se = _expected_width(x[:, None], np.array([1.0]), w)
+        afters.append(a)
+        ses.append(se)
+    spread = float(np.std(afters, ddof=1))
+    assert spread > 0
+    assert 0.7 < float(np.mean(ses)) / spread < 1.4
+    # the width itself: sqrt(s²/(1+s²)) of the current width (closed form)
+    assert float(np.mean(afters)) == pytest.approx(np.sqrt(s**2 / (1 + s**2)), abs=0.05)
+
+
+def _median_amplitude(fit, mu, branch):
+    a = fit.amplitude(np.atleast_1d(mu), branch)
+    return np.array([np.nanmedian(c) if np.isfinite(c).any() else np.nan for c in a.T]), \
+        np.isfinite(a).mean(axis=0)
+
+
+def test_design_never_recommends_a_rare_or_small_orbit(demo):
+    """``min_p_exists`` and ``min_amplitude`` against the fit's own amplitude draws."""
+    mu_fold = float(np.median(demo.samples["mu_fold"]))
+    mu0 = float(np.median(demo.samples["mu0"]))
+    grid = np.linspace(mu_fold - 0.3, mu0 + 0.3, 17)
+    med, p = {}, {}
+    for b in ("stable", "unstable"):
+        med[b], p[b] = _median_amplitude(demo, grid, b)
+    finite = np.concatenate([med["stable"][p["stable"] >= 0.95],
+                             med["unstable"][p["unstable"] >= 0.95]])
+    # a threshold between two predicted amplitudes, well away from both
+    vals = np.sort(finite)
+    gaps = np.diff(vals) / vals[1:]
+    k = int(np.argmax(np.where((np.arange(gaps.size) > 1) & (np.arange(gaps.size)
+                                                               < gaps.size - 2), gaps, 0)))
+    a_min = float(0.5 * (vals[k] + vals[k + 1]))
+    r = next_measurements(demo, target="fold", candidates=grid, n=6, min_p_exists=0.95,
+                          min_amplitude=a_min)
+    assert r.min_p_exists == 0.95 and r.min_amplitude == a_min
+    rows = {(c.mu, c.branch): c for c in r.candidates}
+    n_small = n_rare = 0
+    for b in ("stable", "unstable"):
+        for j, m in enumerate(grid):
+            c = rows[(float(m), b)]
+            if p[b][j] < 0.95:
+                n_rare += 1
+                assert c.skipped and "exists in" in c.skipped, c
+            elif med[b][j] < a_min:
+                n_small += 1
+                assert c.skipped and "below the minimum" in c.skipped, c
+            else:
+                assert not c.skipped, c
+    assert n_small > 0 and n_rare > 0
+    assert r.recommended and all(not c.skipped for c in r.recommended)
+    assert all(np.interp(c.mu, grid, med[c.branch]) >= a_min for c in r.recommended)
+    with pytest.raises(FitError, match="min_amplitude"):
+        next_measurements(demo, candidates=grid, min_amplitude=-1.0)
+
+
+def test_design_gains_carry_their_mc_error_and_are_never_negative(demo):
+    mu0 = float(np.median(demo.samples["mu0"]))
+    grid = np.linspace(mu0 - 2.0, mu0 - 0.1, 12)
+    r = next_measurements(demo, target="hopf", candidates=grid, n=3)
+    done = [c for c in r.candidates if not c.skipped]
+    assert done
+    for c in done:
+        assert c.gain >= 0 and c.width_after <= c.width_now
+        assert np.isfinite(c.gain_mcse) and c.gain_mcse > 0
+        assert (c.note.startswith("no gain")) == (not c.gain > 2 * c.gain_mcse), c
+    js = r.to_json()
+    assert all("gain_mcse" in row and row["gain"] >= 0 for row in js["candidates"]
+               if row["gain"] is not None)
+
+
+def test_design_resolution_merges_and_flags(demo):
+    from bayeshopf.design import BELOW_RESOLUTION
+
+    mu_fold = float(np.median(demo.samples["mu_fold"]))
+    mu0 = float(np.median(demo.samples["mu0"]))
+    grid = np.arange(mu_fold + 0.1, mu0, 0.05)
+    res = 0.4
+    r = next_measurements(demo, target="fold", candidates=grid, n=4, resolution=res)
+    rec = r.recommended
+    assert rec and r.resolution == res
+    for i, a in enumerate(rec):
+        for b in rec[i + 1:]:
+            assert a.branch != b.branch or abs(a.mu - b.mu) > res
+    # every candidate not kept but within the resolution of a better kept one is merged
+    for c in r.candidates:
+        if c.skipped or c in rec:
+            continue
+        better = [k for k in rec if k.branch == c.branch and abs(k.mu - c.mu) <= res
+                  and k.gain >= c.gain]
+        if better:
+            assert "merged into" in c.note, c
+        if not c.note.startswith("no gain") and c.gain < res:
+            assert BELOW_RESOLUTION in c.note, c
+    # a resolution wider than the grid keeps one candidate per branch
+    wide = next_measurements(demo, target="fold", candidates=grid, n=4, resolution=100.0)
+    assert len(wide.recommended) <= 2
+    assert len({c.branch for c in wide.recommended}) == len(wide.recommended)
+
+
+def test_design_labels_from_the_fit_and_rank_order(demo):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bayeshopf.plotting.design import plot_design
+
+    name = demo.spec.frame.names[0]
+    r = next_measurements(demo, target="diagram", candidates=[16.0, 16.5, 17.0], n=2)
+    assert r.amplitude_label == f"peak-to-peak of {name}"
+    fig = plot_design(r, demo)
+    ax_d, ax_g = fig.axes[0], fig.axes[1]
+    assert f"peak-to-peak of {name}" in ax_g.get_ylabel()
+    assert f"peak-to-peak of {name}" in ax_d.get_ylabel()
+    if name != "z1":
+        assert "z1" not in ax_g.get_ylabel() + ax_d.get_ylabel()
+    plt.close(fig)
+    df = r.to_dataframe()
+    n = len(r.recommended)
+    assert list(df["rank"][:n]) == list(range(1, n + 1)) and df["rank"][n:].isna().all()
+
+
+def test_cli_next_skips_merges_and_reports_mc_error(demo, tmp_path, capsys):
+    import json
+
+    from bayeshopf.fit_folder import save_hybrid
+
+    out = tmp_path / "fit"
+    save_hybrid(demo, out)
+    assert main(["next", str(out), "--target", "fold", "--min-p-exists", "0.99",
+                 "--min-amplitude", "1e9", "--json", "--no-figure"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["recommended"] == [] and doc["min_amplitude"] == 1e9
+    assert all(c["skipped"] for c in doc["candidates"])
+    assert main(["next", str(out), "--target", "hopf", "--resolution", "0.5", "--json",
+                 "--no-figure"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["resolution"] == 0.5 and doc["recommended"]
+    for row in doc["recommended"]:
+        assert row["gain"] >= 0 and row["gain_mcse"] > 0 and "note" in row
+    assert main(["next", str(out), "--target", "hopf", "--no-figure"]) == 0
+    assert "MC se" in capsys.readouterr().out
+    assert main(["next", str(out), "--min-p-exists", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--min-p-exists" in err[0]
+
+
+def test_benchmark_has_the_experimenters_descent():
+    """bench_design.py's descent: one Δμ below the lowest recording, branches alternating."""
+    import subprocess
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from bench_design import START, STRATEGIES, descent_point
+
+    assert "descent" in STRATEGIES
+    low = min(m for m, _ in START)
+    assert descent_point(low, 0.3, 0) == pytest.approx((low - 0.3, "unstable"))
+    assert descent_point(low - 0.3, 0.3, 1)[1] == "stable"
+    r = subprocess.run([sys.executable, str(Path(__file__).parents[1] / "benchmarks"
+                                            / "bench_design.py"), "--help"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "--smoke" in r.stdout and "--delta-mu" in r.stdout

@@ -349,20 +349,20 @@ def test_notebook_executes_in_fast_mode(tmp_path, monkeypatch):
 
 
 @pytest.mark.notebooks
-def test_stored_notebook_is_a_full_run_whose_numbers_are_the_readme_s():
-    """The stored run (default settings, 20 s records, the rig) against the README's numbers."""
+def test_stored_notebook_is_a_full_run_whose_numbers_are_the_docs():
+    """The stored run (default settings, 20 s records, the rig) against ``docs/limits.md``."""
     run = stored(REPO / "notebooks" / "04_missing_physics.ipynb")
     assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
     assert not run.errors and "fast mode: False" in run.text
     assert "calibrate=" not in "".join(c.source for c in run.code)   # the default: calibrated
-    readme = (REPO / "README.md").read_text()
+    readme = (REPO / "docs" / "limits.md").read_text()
     text = run.text
-    # the blind run's hybrid fit, quoted in the README's limits
+    # the blind run's hybrid fit, quoted in the limits
     assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.143 " \
            "[13.995, 14.252]" in text
     assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.143 [13.995, 14.252] m/s" in \
         " ".join(readme.split())
-    # the rig: the hybrid fit's fold (with the control term) as the README gives it, the
+    # the rig: the hybrid fit's fold (with the control term) as the limits give it, the
     # calibrated fold
     assert "fold 14.258 [13.810, 14.523]" in text and "14.26 [13.81, 14.52] m/s with it, as " \
         "notebook 04's stored run has it" in " ".join(readme.split())

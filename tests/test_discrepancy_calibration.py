@@ -205,7 +205,7 @@ def _profiled(raw, sigma, mean_cols):
 @pytest.mark.parametrize("tau_true", [0.0, 0.03])
 def test_model_error_posterior_is_the_exact_one_and_holds_the_planted_value(tau_true):
     # raw residuals y - g = offset + N(0, noise² + (τ ref)²); the nominal model (nothing fitted)
-    from bayeshopf.discrepancy.calibration import TAU, _null, _rewhiten
+    from bayeshopf.discrepancy.evidence import TAU, _null, _rewhiten
 
     rng = np.random.default_rng(7)
     R, P, mean_cols = 8, 12, [0, 6]
@@ -266,7 +266,7 @@ def test_model_error_posterior_is_the_exact_one_and_holds_the_planted_value(tau_
 def test_screened_pair_evidence_is_the_exact_linear_gaussian_one():
     # y = A z + g1 ζ1 + g2 ζ2 + ε, all standard normal priors: the pair's Laplace evidence
     # (τ fixed by a zero-noise-free fitter) is exact for a linear model
-    from bayeshopf.discrepancy.calibration import _gauss_evidence
+    from bayeshopf.discrepancy.evidence import _gauss_evidence
 
     A, g1, y = _linear_problem(2, zeta=0.8)
     g2 = np.random.default_rng(3).normal(size=g1.size)

@@ -1,7 +1,11 @@
-"""The quick-start example script and notebook run end to end (in their fast mode)."""
+"""The quick-start example script and notebook run end to end (in their fast mode).
+
+Every example and notebook reaches the package through ``import bayeshopf as bh``.
+"""
 
 from __future__ import annotations
 
+import ast
 import math
 import os
 import re
@@ -84,7 +88,8 @@ def test_stored_notebook_has_outputs_of_a_full_run():
 
 
 @pytest.mark.notebooks
-@pytest.mark.parametrize("number, name", [("02", "02_numerical_examples"),
+@pytest.mark.parametrize("number, name", [("01", "01_quickstart"),
+                                          ("02", "02_numerical_examples"),
                                           ("03", "03_wind_tunnel"),
                                           ("04", "04_missing_physics"),
                                           ("05", "05_experimental_design")])
@@ -104,3 +109,69 @@ def test_stored_notebook_is_a_full_run_of_its_build_script(number: str, name: st
     assert not run.errors
     assert "fast mode: False" in run.text or "fast mode" not in "".join(
         c.source for c in run.code), "stored outputs must come from a default-settings run"
+
+
+# ------------------------------------------------------------ one way into the package
+
+EXAMPLES = sorted((REPO / "examples").glob("*.py"))
+BUILD_SCRIPTS = sorted((REPO / "notebooks" / "_src").glob("build_*.py"))
+
+
+def _code_of(path: Path) -> str:
+    """An example's source, or the code cells a notebook build script writes (magics left out)."""
+    if path.parent.name == "examples":
+        return path.read_text()
+    cells = [src for kind, src in built_sources(path) if kind == "code"]
+    return "\n".join(ln for src in cells for ln in src.splitlines() if not ln.startswith("%"))
+
+
+def bayeshopf_imports(code: str) -> list[str]:
+    """The statements of ``code`` that import bayeshopf otherwise than as ``bh``.
+
+    Allowed: ``import bayeshopf as bh``, and ``import bayeshopf.<module>`` that
+    only loads a module so that ``bh.<package>.<module>`` reaches it; then the
+    name ``bayeshopf`` itself must not be used.
+    """
+    tree = ast.parse(code)
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "bayeshopf":
+            bad.append(f"line {node.lineno}: from {node.module} import ...")
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] != "bayeshopf":
+                    continue
+                if a.name == "bayeshopf" and a.asname == "bh":
+                    continue
+                if a.name != "bayeshopf" and a.asname is None:
+                    continue
+                bad.append(f"line {node.lineno}: import {a.name}"
+                           + (f" as {a.asname}" if a.asname else ""))
+        elif isinstance(node, ast.Name) and node.id == "bayeshopf":
+            bad.append(f"line {node.lineno}: uses the name bayeshopf (bh expected)")
+    if not any(isinstance(n, ast.Import) and any(a.name == "bayeshopf" and a.asname == "bh"
+                                                  for a in n.names) for n in ast.walk(tree)):
+        bad.append("no 'import bayeshopf as bh'")
+    return bad
+
+
+def test_import_rule_catches_the_old_imports():
+    assert bayeshopf_imports("import bayeshopf as bh\nbh.fit(1)\n") == []
+    assert bayeshopf_imports("import bayeshopf as bh\nimport bayeshopf.plotting.truth\n"
+                             "bh.plotting.truth.plot_diagram_vs_truth(1, 2)\n") == []
+    assert bayeshopf_imports("import bayeshopf as bh\n"
+                             "from bayeshopf.posterior import fit_hybrid\n") == [
+        "line 2: from bayeshopf.posterior import ..."]
+    assert bayeshopf_imports("import bayeshopf\nbayeshopf.fit(1)\n") == [
+        "line 1: import bayeshopf", "line 2: uses the name bayeshopf (bh expected)",
+        "no 'import bayeshopf as bh'"]
+    assert bayeshopf_imports("import bayeshopf as bh\nimport bayeshopf.plotting as bp\n") == [
+        "line 2: import bayeshopf.plotting as bp"]
+
+
+@pytest.mark.parametrize("path", EXAMPLES + BUILD_SCRIPTS, ids=lambda p: p.name)
+def test_examples_and_notebooks_import_bayeshopf_as_bh(path: Path):
+    if path.parent.name != "examples":
+        pytest.importorskip("nbformat")
+    assert bayeshopf_imports(_code_of(path)) == []
+    assert "configure_xla_cpu" not in _code_of(path)   # bh.fit sets JAX's CPU flags itself

@@ -1,4 +1,4 @@
-"""Hidden effects written without the term library (benchmarks/independent_effects.py).
+"""Hidden effects written without the term library (tests/testbed/independent_effects.py).
 
 Each effect is checked against a closed form worked out here (not its own
 formula where another route exists): zero size is the nominal system bit for
@@ -12,26 +12,21 @@ recording of it can be computed for each modified system.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from testbed import independent_effects as ie
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-
-import independent_effects as ie  # noqa: E402
-
-from bayeshopf.simulators import (  # noqa: E402
+from bayeshopf.simulators import (
     FLUTTER3DOF,
     SimulationError,
     eigenvalues,
     find_hopf,
     jacobian,
 )
-from bayeshopf.simulators.flutter import flutter_matrices  # noqa: E402
+from bayeshopf.simulators.flutter import flutter_matrices
 
 F = FLUTTER3DOF
 P = dict(F.params)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from jax.flatten_util import ravel_pytree
 
+from bayeshopf import _xla
 from bayeshopf.errors import FitError
 from bayeshopf.inference import cache
 from bayeshopf.inference.collapsed import laplace_covariance
@@ -20,7 +21,7 @@ from bayeshopf.inference.collapsed import laplace_covariance
 
 def test_xla_cpu_flags_are_added_once_and_a_users_choice_is_kept(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=true --xla_dump_to=/tmp/x")
-    monkeypatch.setattr(cache, "_jaxlib_version", lambda: (0, 10))
+    monkeypatch.setattr(_xla, "_jaxlib_version", lambda: (0, 10))
     added = cache.configure_xla_cpu()
     flags = os.environ["XLA_FLAGS"].split()
     assert "--xla_cpu_multi_thread_eigen=true" in flags          # the user's, kept
@@ -33,14 +34,14 @@ def test_xla_cpu_flags_are_added_once_and_a_users_choice_is_kept(monkeypatch):
 
 def test_older_xla_gets_no_flag_it_does_not_know(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "")
-    monkeypatch.setattr(cache, "_jaxlib_version", lambda: (0, 4))
+    monkeypatch.setattr(_xla, "_jaxlib_version", lambda: (0, 4))
     assert cache.configure_xla_cpu() == [cache.SINGLE_THREAD_EIGEN]
     assert "fusion_emitters" not in os.environ["XLA_FLAGS"]
 
 
 def test_host_devices_are_asked_for_once_unless_the_user_chose(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "")
-    monkeypatch.setattr(cache, "_jaxlib_version", lambda: (0, 10))
+    monkeypatch.setattr(_xla, "_jaxlib_version", lambda: (0, 10))
     assert cache.configure_xla_cpu() == [cache.SINGLE_THREAD_EIGEN, cache.CLASSIC_FUSION]
     added = cache.configure_xla_cpu(host_devices=2)
     assert added[-1] == f"{cache.HOST_DEVICES}=2"
@@ -169,7 +170,7 @@ def test_model_functions_are_reused_only_for_the_same_arguments():
     info = ci.model_functions(kw)[0]
     assert ci.model_functions(kw)[0] is info
     # equal values in new arrays, or a changed μ: a new model run, not the cached one
-    moved = {**kw, "mu": kw["mu"] + 0.1}
+    moved = replace(kw, mu=kw.mu + 0.1)
     info_moved = ci.model_functions(moved)[0]
     assert info_moved is not info
     x = info_moved.param_info.z
@@ -313,7 +314,7 @@ def test_a_program_stored_by_one_process_runs_in_the_next(tmp_path):
 
 def test_arviz_and_matplotlib_are_not_imported_with_the_inference_core():
     """They are imported beside NUTS (bayeshopf._preload), not before the fit starts."""
-    code = ("import sys, bayeshopf.posterior, bayeshopf.report, bayeshopf.cli.main; "
+    code = ("import sys, bayeshopf.posterior, bayeshopf.fit_folder, bayeshopf.cli.main; "
             "print(sorted(m for m in ('arviz', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
@@ -346,7 +347,7 @@ def _banana(monkeypatch):
     """
     from types import SimpleNamespace
 
-    from bayeshopf.inference import collapsed as ci
+    from bayeshopf.inference import programs
 
     unravel = ravel_pytree({"mu0": 0.0, "a2": 0.0})[1]
 
@@ -355,8 +356,8 @@ def _banana(monkeypatch):
         return 0.5 * p["mu0"] ** 2 + 0.5 * ((p["a2"] - 0.5 * p["mu0"] ** 2) / 0.5) ** 2
 
     info = SimpleNamespace(postprocess_fn=lambda p: p)
-    monkeypatch.setattr(ci, "model_functions", lambda kw: (info, unravel, potential))
-    monkeypatch.setattr(ci, "model_key", lambda kw: ("banana",))
+    monkeypatch.setattr(programs, "model_functions", lambda kw: (info, unravel, potential))
+    monkeypatch.setattr(programs, "model_key", lambda kw: ("banana",))
     monkeypatch.setattr(cache, "_COMPILED", {})
     start = SimpleNamespace(unconstrained={"mu0": 0.3, "a2": 0.1})
     return potential, unravel, start
@@ -368,6 +369,7 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
     from numpyro.infer import MCMC, NUTS
 
     from bayeshopf.inference import collapsed as ci
+    from bayeshopf.inference import nuts
 
     potential, unravel, start = _banana(monkeypatch)
     settings = replace(ci.CollapsedSettings(), num_chains=2, num_warmup=150, num_samples=100,
@@ -380,8 +382,8 @@ def test_nuts_in_stages_is_numpyros_mcmc_and_is_extended_until_the_checks_pass(m
     assert sampler["mass_matrix_start"] == "laplace"
     # where every check passes, the first 100 draws are the answer: the first 100 of
     # the extended run, from the same program (only the run's length depends on them)
-    monkeypatch.setattr(ci, "ESS_MIN", 0)
-    monkeypatch.setattr(ci, "RHAT_MAX", np.inf)
+    monkeypatch.setattr(nuts, "ESS_MIN", 0)
+    monkeypatch.setattr(nuts, "RHAT_MAX", np.inf)
     short, div, sampler = ci._nuts({}, start, settings, key, progress=False)
     assert sampler["draws_per_chain"] == 100
     np.testing.assert_array_equal(short["a2"], long["a2"][:, :100])
@@ -416,7 +418,7 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, sys.argv[1])
 import test_inference_setup as t
 from bayeshopf import _preload
-from bayeshopf.inference import cache, collapsed as ci
+from bayeshopf.inference import cache, collapsed as ci, devices, programs
 mp = pytest.MonkeyPatch()
 _, _, start = t._banana(mp)
 settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
@@ -427,7 +429,7 @@ key = jax.random.PRNGKey(5)
 _SPREAD = _BANANA_PROCESS.format(devices=3) + """
 print(jax.local_device_count(), [ci.spread_devices(n) for n in (1, 2, 3, 4, 5, 6)])
 spread, div, _ = ci._nuts({}, start, settings, key, progress=False)
-mp.setattr(ci, "spread_devices", lambda n: 1)
+mp.setattr(devices, "spread_devices", lambda n: 1)
 one, div1, _ = ci._nuts({}, start, settings, key, progress=False)
 print(max(float(np.abs(spread[k] - one[k]).max()) for k in one), div == div1,
       float(np.abs(spread["mu0"][0] - spread["mu0"][3]).max()))
@@ -446,7 +448,7 @@ def test_chains_spread_over_devices_are_the_chains_of_one_device():
 
 
 _AHEAD = _BANANA_PROCESS.format(devices=2) + """
-info, _, potential = ci.model_functions({})
+info, _, potential = programs.model_functions({})
 info.param_info = SimpleNamespace(z={"mu0": jnp.asarray(0.0), "a2": jnp.asarray(0.0)})
 mp.setattr(ci, "_map_draw", lambda kw: lambda a: (a[0]["mu0"] * 2.0, a[1].sum()))
 mp.setattr(ci, "_pointwise", lambda kw: lambda t: t["a2"] - t["mu0"])
@@ -512,14 +514,15 @@ def test_the_imports_start_beside_the_first_nuts_chunk_not_beside_the_laplace_lo
     so ``_preload.start`` runs once NUTS's first chunk is dispatched, and once."""
     from bayeshopf import _preload
     from bayeshopf.inference import collapsed as ci
+    from bayeshopf.inference import nuts, optimum
 
     _, _, start = _banana(monkeypatch)
     events = []
     laplace = ci.laplace_covariance
-    monkeypatch.setattr(ci, "laplace_covariance",
+    monkeypatch.setattr(optimum, "laplace_covariance",
                         lambda *a: (events.append("laplace"), laplace(*a))[1])
     monkeypatch.setattr(_preload, "start", lambda: events.append("imports"))
-    compiled_function = ci.compiled_function
+    compiled_function = nuts.compiled_function
 
     def advancing(name, *a, **k):
         fn = compiled_function(name, *a, **k)
@@ -527,7 +530,7 @@ def test_the_imports_start_beside_the_first_nuts_chunk_not_beside_the_laplace_lo
             return fn
         return lambda *x: (events.append("chunk"), fn(*x))[1]
 
-    monkeypatch.setattr(ci, "compiled_function", advancing)
+    monkeypatch.setattr(nuts, "compiled_function", advancing)
     settings = replace(ci.CollapsedSettings(), num_chains=2, num_warmup=50, num_samples=50,
                        extend_samples=50, max_samples=50)
     ci._nuts({}, start, settings, jax.random.PRNGKey(0), progress=False)

@@ -140,7 +140,7 @@ def test_vanderpol_blind_fit_mu0_interval_holds_zero(vanderpol):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="K = 4 harmonics overstate the relaxation-shaped orbits' "
-                   "peak-to-peak by up to 1.9%: 1/5 held out inside (README, Limits)")
+                   "peak-to-peak by up to 1.9%: 1/5 held out inside (docs/limits.md)")
 def test_vanderpol_held_out_orbits_inside_predictive_bands(vanderpol):
     _, truth, result = vanderpol
     rows = held_out_check(result, truth)

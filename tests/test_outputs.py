@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from bayeshopf import report  # noqa: E402
+from bayeshopf import fit_folder  # noqa: E402
 from bayeshopf.errors import DataError  # noqa: E402
 
 with warnings.catch_warnings():
@@ -28,7 +28,7 @@ GROUPS = {"posterior", "log_likelihood", "posterior_predictive", "observed_data"
 def saved(fast_demo_fit, tmp_path_factory):
     """The session's fast demo fit written to a folder (no figures): ``(folder, fit, rs)``."""
     fit, rs, _ = fast_demo_fit
-    folder = report.save_hybrid(fit, tmp_path_factory.mktemp("outputs") / "fit")
+    folder = fit_folder.save_hybrid(fit, tmp_path_factory.mktemp("outputs") / "fit")
     return folder, fit, rs
 
 
@@ -76,7 +76,7 @@ def test_posterior_nc_opens_in_arviz_with_groups_and_coordinates(saved) -> None:
 
 def test_load_fit_draws_everything_again_without_refitting(saved, tmp_path) -> None:
     folder, fit, rs = saved
-    loaded = report.load_fit(folder)
+    loaded = fit_folder.load_fit(folder)
     post = loaded.posterior
     mu = fit.default_mu_grid(40)
     a, b = fit.diagram(mu), loaded.diagram(mu)
@@ -119,7 +119,7 @@ def test_a_folder_without_the_saved_features_says_what_to_do(saved, tmp_path) ->
     del idata.observed_data["amplitude"]
     os.remove(old / "posterior.nc")
     idata.to_netcdf(str(old / "posterior.nc"))
-    loaded = report.load_fit(old)
+    loaded = fit_folder.load_fit(old)
     assert loaded.predict(17.0).median > 0                          # predict still works
     with pytest.raises(DataError, match="observed_data variables amplitude.*fit the "
                                         "recordings again"):
@@ -138,14 +138,14 @@ def test_ci_levels(saved, tmp_path) -> None:
     p50 = fit.ppc(0.5)
     assert p50.ci == 0.5 and all(a.width < b.width for a, b in zip(
         p50.predictive, fit.ppc().predictive, strict=True))
-    loaded = report.load_fit(folder)
+    loaded = fit_folder.load_fit(folder)
     assert loaded.predict(17.0, ci=0.5).width < loaded.predict(17.0).width
     assert loaded.frequency(17.0, ci=0.5).width < loaded.frequency(17.0).width
     band = fit.frequency_band(mu, "stable", ci=0.5)
     wide = fit.frequency_band(mu, "stable")
     ok = np.isfinite(band.lo)
     assert np.all(band.hi[ok] - band.lo[ok] < wide.hi[ok] - wide.lo[ok])
-    s = report.summary_hybrid(fit, ci=0.95)
+    s = fit_folder.summary_hybrid(fit, ci=0.95)
     assert s["ci"] == 0.95 and "ci95" in s["mu0"] and "inside_ci95" in s["recordings"][0]
     assert "amplitudes_inside_ci95" in s["ppc"]
     assert json.loads((folder / "summary.json").read_text())["ci"] == 0.9
@@ -182,14 +182,14 @@ def test_diagram_and_ppc_convert_to_xarray_and_pandas(fast_demo_fit) -> None:
 
 
 def test_leave_one_out_converts_to_xarray_and_pandas() -> None:
-    from bayeshopf.validation import Fold, HeldOut, LeaveOneOut
+    from bayeshopf.validation import HeldOut, HeldOutFold, LeaveOneOut
 
     def held(m, lo, hi):
         return HeldOut(m, lo, hi, 1.0, (15.0, 14.9, 15.1), (18.0, 17.9, 18.1))
 
     folds = tuple(
-        Fold(f"r{i}", 15.0 + i, "stable", 1.0 + i, 0.01,
-             {"bayes": held(1.0 + i, 0.9 + i, 1.2 + i), "map": held(1.1 + i, 1.05 + i, 1.15 + i)})
+        HeldOutFold(f"r{i}", 15.0 + i, "stable", 1.0 + i, 0.01,
+            {"bayes": held(1.0 + i, 0.9 + i, 1.2 + i), "map": held(1.1 + i, 1.05 + i, 1.15 + i)})
         for i in range(3))
     loo = LeaveOneOut(folds, ("bayes", "map"))
     ds = loo.to_dataset()
@@ -233,7 +233,7 @@ def test_files_are_written_while_pending_figures_finish(tmp_path, monkeypatch) -
     run before the wait, inside the figures' time; one that returns its paths has
     it run after, outside their time. A clock that moves only when told."""
     clock, order = [0.0], []
-    monkeypatch.setattr(report.time, "perf_counter", lambda: clock[0])
+    monkeypatch.setattr(fit_folder.time, "perf_counter", lambda: clock[0])
 
     def step(name, seconds):
         order.append(name)
@@ -249,12 +249,12 @@ def test_files_are_written_while_pending_figures_finish(tmp_path, monkeypatch) -
 
     for name in "abc":
         (tmp_path / name).mkdir()
-    timings = report._draw_figures(pending, tmp_path / "a", lambda: step("files", 5.0))
+    timings = fit_folder._draw_figures(pending, tmp_path / "a", lambda: step("files", 5.0))
     assert order == ["figures", "files", "wait"] and timings == {"figures": 8.0}
-    assert (tmp_path / "a" / report.FIGURES).is_dir()
+    assert (tmp_path / "a" / fit_folder.FIGURES).is_dir()
     order.clear()
-    timings = report._draw_figures(done, tmp_path / "b", lambda: step("files", 5.0))
+    timings = fit_folder._draw_figures(done, tmp_path / "b", lambda: step("files", 5.0))
     assert order == ["figures", "files"] and timings == {"figures": 1.0}
     order.clear()
-    assert report._draw_figures(None, tmp_path / "c", lambda: step("files", 5.0)) == {}
+    assert fit_folder._draw_figures(None, tmp_path / "c", lambda: step("files", 5.0)) == {}
     assert order == ["files"]

@@ -156,7 +156,9 @@ def test_plot_bifurcation_defaults_and_given_axes(fitted) -> None:
     ax = fig.add_subplot(1, 2, 2)
     assert plot_bifurcation(d, ax=ax, legend=False) is fig
     assert ax.get_legend() is None
-    assert ax.get_ylabel() == "peak-to-peak of z1" and ax.get_xlabel() == "μ"
+    # without the fit's names the axes say what they are, not a placeholder channel
+    assert ax.get_ylabel() == "amplitude (peak-to-peak)"
+    assert ax.get_xlabel() == "bifurcation parameter"
     assert not _by_gid(ax.lines, "stable-measured") and not _by_gid(ax.lines, "truth")
 
     # a supercritical diagram: one branch, no fold
@@ -405,7 +407,7 @@ def test_length_unit_scales_lengths_only(fitted) -> None:
     np.testing.assert_allclose(b.get_ydata(), 1000 * np.asarray(a.get_ydata()), equal_nan=True)
     (a,), (b,) = _by_gid(base.lines, "stable-measured"), _by_gid(mm.lines, "stable-measured")
     np.testing.assert_allclose(b.get_ydata(), 1000 * np.asarray(a.get_ydata()))
-    assert mm.get_ylabel() == "peak-to-peak of z1 [mm]"
+    assert mm.get_ylabel() == "amplitude (peak-to-peak) [mm]"
     assert mm.get_ylim()[1] == pytest.approx(1000 * base.get_ylim()[1])
     # phase portraits: h (m) in mm, alpha (rad) in degrees
     ax = plot_phase_portraits(f, rs, n_orbits=2, length_unit="mm", angle_unit="deg",
@@ -514,3 +516,146 @@ def test_time_series_legend_keys_show_each_branch_colour(fitted) -> None:
     assert both[1] == both[2] == {hexes["stable"], hexes["unstable"]}
     stable_only = key_colours(plot_time_series([b for b in bands if b.branch == "stable"]))
     assert stable_only[1] == stable_only[2] == {hexes["stable"]}
+
+
+# -- the figures' faults (issue 52) ---------------------------------------------------
+
+
+def _band_width_at(band, mu: float) -> float:
+    """Width of the outer band at the grid point nearest ``mu`` (from the record)."""
+    i = int(np.argmin(np.abs(np.asarray(band.mu, float) - mu)))
+    q = np.asarray(band.quantiles, float)
+    return float(q[4, i] - q[0, i])
+
+
+def test_inset_shows_the_bands_where_they_are_thin(fitted) -> None:
+    f, d, ppc = fitted["fit"], fitted["diagram"], fitted["ppc"]
+    centre = float(np.max(ppc.mu[~ppc.unstable]))
+    width = _band_width_at(d.stable, centre)
+    fig = plot_bifurcation(d, ppc)                   # no window asked for: an inset anyway
+    ax = fig.axes[0]
+    assert width < 0.02 * ax.get_ylim()[1]          # a line at full scale
+    (inset,) = ax.child_axes
+    lo, hi = inset.get_xlim()
+    assert lo < centre < hi
+    y0, y1 = inset.get_ylim()
+    # the band fills a visible share of the inset: a few band widths tall
+    assert width < y1 - y0 < 6 * width
+    i = int(np.argmin(np.abs(d.stable.mu - centre)))
+    assert y0 < d.stable.quantiles[0, i] < d.stable.quantiles[4, i] < y1
+    # the window fit.plot passes (default_zoom) also gets an inset scaled to the band
+    window = default_zoom(f, d.stable.mu)
+    (inset,) = plot_bifurcation(d, ppc, zoom=window).axes[0].child_axes
+    y0, y1 = inset.get_ylim()
+    q = d.stable.quantiles[:, (d.stable.mu >= window[0]) & (d.stable.mu <= window[1])]
+    assert y1 - y0 < 1.5 * (q[4].max() - q[0].min())   # not the predictive band's range
+    assert not plot_bifurcation(d, ppc, zoom=None).axes[0].child_axes
+    # bands wide enough to see at full scale need no inset
+    wide = dataclasses.replace(d.stable, quantiles=d.stable.quantiles[2]
+                               * np.array([0.7, 0.85, 1.0, 1.15, 1.3])[:, None])
+    assert not plot_bifurcation(dataclasses.replace(d, stable=wide)).axes[0].child_axes
+
+
+def test_dashed_median_looks_as_its_legend_key(fitted) -> None:
+    """The dashes' gaps show the band, not the dotted predictive edges (read as dash-dot)."""
+    import matplotlib.colors as mcolors
+
+    from bayeshopf.plotting.diagram import _BandHandler, _BandKey
+
+    d = fitted["diagram"]
+    fig = plot_bifurcation(d, fitted["ppc"])
+    ax = fig.axes[0]
+    (median,) = _by_gid(ax.lines, "unstable-median")
+    assert median.get_linestyle() == "--"
+    for edge in _by_gid(ax.lines, "unstable-predictive"):
+        assert edge.get_zorder() < median.get_zorder()
+    # the gaps take the colour of both bands laid over white
+    (b90,), (b50,) = (_by_gid(ax.collections, f"unstable-band{k}") for k in (90, 50))
+    rgb = np.array(mcolors.to_rgb(median.get_color()))
+    seen = 1 - (1 - b90.get_alpha()) * (1 - b50.get_alpha())
+    assert median.get_gapcolor() is not None
+    np.testing.assert_allclose(mcolors.to_rgb(median.get_gapcolor()), seen * rgb + 1 - seen)
+    leg = ax.get_legend()
+    arts = _BandHandler().create_artists(leg, _BandKey("unstable"), 0, 0, 30, 10, 8,
+                                         ax.transAxes)
+    (key,) = [a for a in arts if hasattr(a, "get_linestyle") and hasattr(a, "get_xdata")]
+    assert key.get_linestyle() == median.get_linestyle()
+    assert key.get_linewidth() == median.get_linewidth()
+    assert mcolors.to_rgb(key.get_gapcolor()) == mcolors.to_rgb(median.get_gapcolor())
+
+
+def test_ppc_bars_are_visible_and_named_from_the_fit(fitted) -> None:
+    ppc = fitted["ppc"]
+    fig = plot_ppc(ppc, amplitude_units="m", amplitude_label="peak-to-peak of h",
+                   channels=("h", "alpha"))
+    ax_a, ax_b = fig.axes[:2]
+    height = np.ptp(ax_a.get_ylim())
+    widest = max(iv.hi - iv.lo for iv in ppc.predictive)
+    assert widest > 0.3 * height         # the predictive intervals span the panel
+    (bars,) = [c for c in _by_gid(ax_a.collections, "stable-predictive")
+               if hasattr(c, "get_segments")]
+    seg = np.array(bars.get_segments())
+    stable = ~ppc.unstable
+    lo = np.array([iv.lo for iv in ppc.predictive])[stable] - ppc.measured[stable]
+    np.testing.assert_allclose(np.sort(seg[:, 0, 1]), np.sort(lo))   # predicted − measured
+    ticks = [t.get_text() for t in ax_b.get_xticklabels()]
+    half = coefficient_labels(ppc.coeff_z.shape[1] // 2)
+    assert ticks == [f"h:{k}" for k in half] + [f"alpha:{k}" for k in half]
+    assert "z1" not in ax_b.get_xlabel() and "h, alpha" in ax_b.get_xlabel()
+    cbar_label = fig.axes[2].get_ylabel()
+    assert "Φ" not in cbar_label and "\\Phi" not in cbar_label and "measured" in cbar_label
+    # one axes: panel (a) only, with no forced title
+    one = Figure().add_subplot()
+    plot_ppc(ppc, ax=one)
+    assert one.get_title(loc="left") == "" and one.get_title() == ""
+    assert "(a)" in ax_a.get_title(loc="left")     # both panels: told apart
+
+
+def test_frequency_legend_lists_only_what_is_seen(fitted) -> None:
+    from bayeshopf.plotting import plot_frequency
+
+    f = fitted["fit"]
+    mu = diagram_grid(f)
+    bands = [f.frequency_band(mu, b) for b in ("stable", "unstable")]
+    pred = [f.frequency_band(mu, b, predictive=True) for b in ("stable", "unstable")]
+    fig = plot_frequency(bands, predictive=pred)
+    ax = fig.axes[0]
+    height = np.ptp(ax.get_ylim())
+    assert all(np.nanmedian(b.hi - b.lo) < 0.01 * height for b in bands + pred)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert len(texts) == 2 and not any("new recording" in t for t in texts)
+    assert all("narrower than the line" in t for t in texts)
+    assert not _by_gid(ax.lines, "stable-predictive")
+    # bands widened to a tenth of the range are drawn and listed
+    spread = 0.1 * height
+
+    def widen(b):
+        return dataclasses.replace(b, lo=b.median - spread, hi=b.median + spread)
+
+    ax = plot_frequency([widen(b) for b in bands], predictive=[widen(b) for b in pred]).axes[0]
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "stable, median and 90% CI" in texts and "unstable, new recording (90%)" in texts
+    assert len(_by_gid(ax.lines, "stable-predictive")) == 2
+
+
+def test_measured_trace_is_drawn_over_the_median(fitted) -> None:
+    from bayeshopf.plotting import plot_time_series
+
+    bands = fitted["fit"].time_series_bands(fitted["rs"])[:2]
+    fig = plot_time_series(bands)
+    for ax in fig.axes[:2]:
+        (measured,), (median,) = _by_gid(ax.lines, "measured"), _by_gid(ax.lines, "median")
+        assert measured.get_zorder() > median.get_zorder()
+        assert median.get_linewidth() > measured.get_linewidth()   # shows on either side
+
+
+def test_default_labels_and_the_documented_route(fitted) -> None:
+    from bayeshopf.plotting import plot_frequency, plot_time_series
+
+    fig = plot_bifurcation(fitted["diagram"], fitted["ppc"], legend=False)
+    ax = fig.axes[0]
+    assert "z1" not in ax.get_ylabel() and ax.get_xlabel() != "μ"
+    for fn, route in ((plot_bifurcation, "fit.plot.bifurcation"), (plot_ppc, "fit.plot.ppc"),
+                      (plot_frequency, "fit.plot.frequency"),
+                      (plot_time_series, "fit.plot.time_series")):
+        assert route in fn.__doc__, fn.__name__

@@ -115,7 +115,7 @@ def test_predicted_time_series_follows_the_recording(planted):
 def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_path):
     """The model error away from the data: nil at a training μ, wide beyond the last recording,
     and the same band from the saved fit (``bayeshopf predict --predictive``)."""
-    from bayeshopf import report
+    from bayeshopf import fit_folder
 
     post, _, _ = planted
     off = replace(post, settings=replace(post.settings, extrapolation=False))
@@ -137,8 +137,8 @@ def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_
     off_b = np.quantile(off.amplitude(beyond, "stable", predictive=True)[:, 0], q)
     assert on_b[2] - on_b[0] > 3 * (off_b[2] - off_b[0]), (on_b, off_b)
     assert on_b[1] == pytest.approx(off_b[1], rel=0.02)          # wider, not shifted
-    report.save_hybrid(post, tmp_path / "fit")
-    saved = report.load_fit(tmp_path / "fit").predict(beyond[0], "stable", predictive=True)
+    fit_folder.save_hybrid(post, tmp_path / "fit")
+    saved = fit_folder.load_fit(tmp_path / "fit").predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([saved.lo, saved.median, saved.hi], on_b, rtol=1e-9)
     # a larger prior scale (CollapsedSettings.extrapolation_scale) widens the band away
     # from the data only, and a saved fit keeps it
@@ -148,8 +148,8 @@ def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_
                                rtol=1e-4)
     wide_b = np.quantile(wide.amplitude(beyond, "stable", predictive=True)[:, 0], q)
     assert wide_b[2] - wide_b[0] > 2 * (on_b[2] - on_b[0]), (wide_b, on_b)
-    report.save_hybrid(wide, tmp_path / "wide")
-    saved = report.load_fit(tmp_path / "wide").predict(beyond[0], "stable", predictive=True)
+    fit_folder.save_hybrid(wide, tmp_path / "wide")
+    saved = fit_folder.load_fit(tmp_path / "wide").predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([saved.lo, saved.median, saved.hi], wide_b, rtol=1e-9)
 
 
@@ -303,7 +303,7 @@ def test_a_large_relative_model_error_widens_new_bands_away_from_the_data_and_sa
     warning says so; a saved fit keeps the rule. A scale set by the user is kept whatever
     σ_rel, and the warning then says the bands are not calibrated. Below the limit in
     every draw: 0.1, and no warning."""
-    from bayeshopf import report
+    from bayeshopf import fit_folder
     from bayeshopf.posterior import SIGMA_REL_MAX, diagnose
 
     post, _, _ = planted
@@ -328,7 +328,7 @@ def test_a_large_relative_model_error_widens_new_bands_away_from_the_data_and_sa
     d = diagnose(bad)
     (w,) = [w for w in d["warnings"] if "relative model error" in w]
     assert "wider model-error scale 0.7" in w and "in the 70% of the draws" in w
-    assert "fit --leave-one-out" in w and d["fit"]["extrapolation_scale"]["p_above_limit"] > 0.6
+    assert "by leave-one-out" in w and d["fit"]["extrapolation_scale"]["p_above_limit"] > 0.6
     f = post.features
     i = int(np.argmax(np.where(f.unstable, -np.inf, f.mu)))   # the stable recording of largest μ
     beyond, q = [f.mu[i] + 0.5 * post.spec.mu_span], [0.05, 0.5, 0.95]
@@ -344,14 +344,14 @@ def test_a_large_relative_model_error_widens_new_bands_away_from_the_data_and_sa
     b, n, w7 = band(bad, beyond), band(narrow, beyond), band(wide, beyond)
     assert b[2] - b[0] > 3 * (n[2] - n[0]), (b, n)
     assert b[2] - b[0] < w7[2] - w7[0], (b, w7)       # 30% of the draws keep 0.1
-    report.save_hybrid(bad, tmp_path / "fit")
-    saved = report.load_fit(tmp_path / "fit")
+    fit_folder.save_hybrid(bad, tmp_path / "fit")
+    saved = fit_folder.load_fit(tmp_path / "fit")
     assert saved.extrapolation["scale"] is None and saved.posterior.p_misfit == bad.p_misfit
     p = saved.predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([p.lo, p.median, p.hi], b, rtol=1e-9)
     # the user's scale: the warning then says the bands are not calibrated
     (w,) = [w for w in diagnose(narrow)["warnings"] if "relative model error" in w]
-    assert "not calibrated" in w and "fit --leave-one-out" in w
+    assert "not calibrated" in w and "by leave-one-out" in w
 
 
 def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_same(
@@ -360,7 +360,7 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
     span beyond the data is the same from the saved fit (one predictive path); a user's extra
     scale widens it there and leaves a training μ's band as it was; a relative model error
     above the limit is reported as carried by the discrepancy."""
-    from bayeshopf import report
+    from bayeshopf import fit_folder
     from bayeshopf.posterior import SIGMA_REL_MAX, diagnose
 
     post, _, _ = planted_discrepancy
@@ -377,8 +377,8 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
         return np.quantile(p.amplitude(where, "stable", predictive=True)[:, 0], q)
 
     b = band(post, beyond)
-    report.save_hybrid(post, tmp_path / "fit")
-    saved = report.load_fit(tmp_path / "fit")
+    fit_folder.save_hybrid(post, tmp_path / "fit")
+    saved = fit_folder.load_fit(tmp_path / "fit")
     p = saved.predict(beyond[0], "stable", predictive=True)
     np.testing.assert_allclose([p.lo, p.median, p.hi], b, rtol=1e-9)
     wide = replace(post, settings=replace(post.settings, extrapolation_scale=0.7))
@@ -389,4 +389,4 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
     chains = {**post.run.chains, "eta": post.run.chains["eta"] + 2 * SIGMA_REL_MAX}
     bad = replace(post, run=replace(post.run, chains=chains))
     (w,) = [w for w in diagnose(bad)["warnings"] if "relative model error" in w]
-    assert "model discrepancy carries it" in w and "fit --leave-one-out" in w
+    assert "model discrepancy carries it" in w and "by leave-one-out" in w

@@ -41,6 +41,7 @@ EXEMPT = {
         "install and the test suite itself",
 }
 
+
 #: Commands that take more than a minute even with ``--fast``, or that need
 #: the output of one that does: run only with ``-m slow``.
 SLOW_COMMANDS = ("demo", "simulate", "discrepancy")
@@ -77,6 +78,29 @@ def test_readme_has_the_blocks_this_test_runs() -> None:
         assert line in README.read_text(), line
 
 
+def test_the_names_the_readme_uses_are_exported() -> None:
+    """Every ``bh.NAME`` of the README is a public name of ``bayeshopf``."""
+    import bayeshopf
+
+    used = set(re.findall(r"\bbh\.([A-Za-z_]\w*)", README.read_text()))
+    assert {"fit", "load_fit", "read_recordings", "next_measurements"} <= used
+    assert used <= set(bayeshopf.__all__), sorted(used - set(bayeshopf.__all__))
+
+
+def test_the_docs_code_blocks_are_the_readmes() -> None:
+    """A code block of the method documents (docs/*.md, the site) is one the README runs.
+
+    The changelog is a record, not instructions, and is left out.
+    """
+    readme = blocks(("python", "bash"))
+    for page in sorted((README.parent / "docs").glob("*.md")):
+        if page.name == "changelog.md":
+            continue
+        text = page.read_text()
+        for m in re.finditer(r"^```(python|bash)\n(.*?)^```", text, re.M | re.S):
+            assert m.group(2) in readme, f"{page.name}: a {m.group(1)} block the README lacks"
+
+
 def test_toml_blocks_are_valid_rig_descriptions(tmp_path) -> None:
     from bayeshopf.data.rig import RigDescription
 
@@ -105,9 +129,15 @@ def test_python_blocks(user_without_shared, tmp_path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "__readme__"}
     for i, code in enumerate(blocks(("python",))):
+        if "read_recordings(\"my_rig/\")" in code and not (tmp_path / "my_rig").exists():
+            from bayeshopf.data import flutter_cbc, write_interchange
+
+            write_interchange(flutter_cbc(download=True), tmp_path / "my_rig")
         exec(compile(code, f"README.md python block {i + 1}", "exec"), namespace)
-    assert len(namespace["rs"]) == 7                       # the rig, from the mirror
-    assert sorted(p.name for p in (tmp_path / "figures").iterdir())
+    assert len(namespace["recordings"]) == 7               # the rig, from the mirror
+    assert len(namespace["rs"]) == 3                       # the NumPy arrays' example
+    assert sorted(p.name for p in (tmp_path / "fit_out" / "figures").iterdir())
+    assert namespace["band"].sizes["mu"] == 2
 
 
 def _run_commands(tmp_path, monkeypatch, capsys, slow: bool) -> list[str]:
@@ -158,3 +188,28 @@ def test_commands(user_without_shared, tmp_path, monkeypatch, capsys) -> None:
 def test_all_commands(user_without_shared, tmp_path, monkeypatch, capsys) -> None:
     ran = _run_commands(tmp_path, monkeypatch, capsys, slow=True)
     assert set(SLOW_COMMANDS) <= set(ran)
+
+
+@pytest.mark.slow
+def test_the_python_block_runs_as_shown_in_a_fresh_process(user_without_shared, tmp_path):
+    """The README's first Python block, unchanged, in a new interpreter beside a busy core.
+
+    ``bh.fit`` makes JAX's CPU settings itself; without them a fit beside another
+    busy process could stall for minutes in XLA's compiler. A second process
+    keeps one core busy meanwhile, as on a user's laptop.
+    """
+    import subprocess
+    import sys
+
+    from bayeshopf.data import flutter_cbc, write_interchange
+
+    code = next(b for b in blocks(("python",)) if "import bayeshopf as bh" in b)
+    write_interchange(flutter_cbc(download=True), tmp_path / "my_rig")
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                              text=True, timeout=600)
+    finally:
+        busy.kill()
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "fit_out" / "summary.json").is_file()

@@ -178,10 +178,10 @@ def _nan_undeclared(rig2, tmp):
     d = _copy(rig2, tmp / "d", files=[FILES[0][0]],
               rig_text=RIG_TOML.replace('missing = ["nan"]\n', ""))
     v = scipy.io.loadmat(d / FILES[0][0])
-    v["data"][3, 5] = np.nan
+    v["data"][3, 5] = np.inf  # NaN is always no reading; inf needs missing = ["nan"]
     scipy.io.savemat(d / FILES[0][0], {k: v[k] for k in ("data", "time", "Wind_sped")})
-    return d, "channel 'alpha' has 1 non-finite sample(s) (NaN/inf), first at index 5; " \
-              'expected finite numbers (or missing = ["nan"]'
+    return d, "channel 'alpha' has 1 infinite sample(s), first at index 5; " \
+              'expected finite numbers or NaN (or missing = ["nan"]'
 
 
 WRONG = [_rows_wrong, _variable_missing, _unknown_key, _branch_needs_manifest, _time_refused,
@@ -376,7 +376,7 @@ def test_second_rig_fits_end_to_end_from_the_cli(rig2, tmp_path, capsys):
     SVI keeps this test in the normal suite (about 25 s; NUTS --fast takes about 60 s).
     """
     from bayeshopf.cli.main import main
-    from bayeshopf.report import load_fit
+    from bayeshopf.fit_folder import load_fit
 
     out = tmp_path / "fit"
     code = main(["fit", str(rig2.folder), "--rig", str(rig2.folder / "rig.toml"),

@@ -19,6 +19,7 @@ from bayeshopf.simulators import (
     FLUTTER3DOF,
     VANDERPOL,
     SimulationError,
+    System,
     bifurcation_diagram,
     eigenvalues,
     get_system,
@@ -122,6 +123,84 @@ def test_vanderpol_small_mu_closed_form(vdp, mu):
     orbit = orbit_at(vdp, mu, "stable")
     assert orbit.amplitude["z1"] == pytest.approx(4.0 * np.sqrt(2.0 * mu), rel=1e-4)
     assert orbit.period == pytest.approx(2 * np.pi * (1 + mu**2 / 4), rel=1e-6)
+
+
+# ----------------------------------------------------------------------------- shooting kernel
+
+
+def _nf_rhs(x, mu, p):
+    """Hopf normal form r' = μ r − r³, θ' = ω in Cartesian coordinates."""
+    g = mu - (x[0] ** 2 + x[1] ** 2)
+    return jnp.stack([g * x[0] - p["omega"] * x[1], g * x[1] + p["omega"] * x[0]])
+
+
+NORMAL_FORM = System(name="normal_form", state_names=("u1", "u2"), state_units=("", ""),
+                     parameter="mu", parameter_units="", params={"omega": 2.0}, rhs=_nf_rhs,
+                     observed=("u1", "u2"), mu_range=(-0.5, 0.5))
+
+
+def _nf_flow(x0, t, mu, omega=2.0):
+    """The closed-form flow: r(t)² = μ r0² / (r0² + (μ − r0²) e^{−2μt}), θ(t) = θ0 + ωt.
+
+    Written with analytic operations only, so the complex step differentiates it.
+    """
+    r2 = x0[0] * x0[0] + x0[1] * x0[1]
+    scale = np.sqrt(mu / (r2 + (mu - r2) * np.exp(-2 * mu * t)))
+    c, s = np.cos(omega * t), np.sin(omega * t)
+    return np.array([c * x0[0] - s * x0[1], s * x0[0] + c * x0[1]]) * scale
+
+
+def _complex_step(f, z, h=1e-30):
+    """Jacobian of a real-analytic ``f`` at ``z`` by the complex step (exact to rounding)."""
+    z = np.asarray(z, dtype=complex)
+    return np.stack([f(z + 1j * h * e).imag / h for e in np.eye(z.size)], axis=-1)
+
+
+@pytest.mark.parametrize("mu_sensitivity", [True, False])
+def test_shooting_kernel_matches_the_closed_form_flow(mu_sensitivity):
+    """The one shooting kernel, with and without dφ/dμ, one orbit and a batch, against the
+    normal form's closed-form flow and its complex-step derivatives, off the cycle."""
+    from bayeshopf.simulators.periodic import kernels, param_tree, split_shot
+
+    # the simulators' tolerances, and the discrepancy's (discrepancy/orbits.py)
+    rtol, atol = (1e-10, 1e-12) if mu_sensitivity else (1e-9, 1e-12)
+    tol = 100 * rtol            # global error of one period, and of the dense output
+    k = kernels(NORMAL_FORM, rtol, atol, max_steps=4096, mu_sensitivity=mu_sensitivity)
+    assert k is kernels(NORMAL_FORM, rtol, atol, max_steps=4096, mu_sensitivity=mu_sensitivity)
+    x0s, Ts, mus = np.array([[0.4, -0.2], [0.9, 0.3]]), np.array([2.5, 1.7]), np.array([0.3, 0.1])
+    p = param_tree(NORMAL_FORM)
+    batch = split_shot(np.asarray(k.shoot_batch(jnp.asarray(x0s), jnp.asarray(Ts),
+                                                jnp.asarray(mus), p)), 2)
+    for i, (x0, T, mu) in enumerate(zip(x0s, Ts, mus, strict=True)):
+        one = split_shot(np.asarray(k.shoot(jnp.asarray(x0), T, mu, p)), 2)
+        x1 = _nf_flow(x0, T, mu)
+        mono = _complex_step(lambda z, T=T, mu=mu: _nf_flow(z, T, mu), x0)
+        dmu = _complex_step(lambda m, x0=x0, T=T: _nf_flow(x0, T, m[0]), [mu])[:, 0]
+        for s in (one, batch._replace(**{f: getattr(batch, f)[i] for f in batch._fields})):
+            assert bool(s.ok)
+            np.testing.assert_allclose(s.x1, x1, rtol=0, atol=tol)
+            np.testing.assert_allclose(s.monodromy, mono, rtol=0, atol=tol)
+            np.testing.assert_allclose(s.f1, np.asarray(_nf_rhs(x1, mu, p)), rtol=0, atol=tol)
+            np.testing.assert_allclose(s.dx_dmu, dmu if mu_sensitivity else 0.0, rtol=0,
+                                       atol=tol)
+        ts = np.arange(8) / 8
+        got = np.asarray(k.sample(jnp.asarray(x0), T, mu, p, 8))
+        np.testing.assert_allclose(got, np.stack([_nf_flow(x0, t * T, mu) for t in ts]),
+                                   rtol=0, atol=tol)
+
+
+def test_periodic_orbit_of_the_normal_form():
+    """Radius √μ, period 2π/ω, Floquet multipliers 1 and e^{−2μ·2π/ω} (the radial one)."""
+    from bayeshopf.simulators import periodic_orbit
+
+    mu = 0.3
+    orbit = periodic_orbit(NORMAL_FORM, mu, [0.5, 0.1], 3.0)
+    assert orbit.period == pytest.approx(np.pi, rel=1e-9)
+    # the samples carry the dense output's error: 100 times the solver's rtol (1e-10)
+    np.testing.assert_allclose(np.hypot(*orbit.states.T), np.sqrt(mu), rtol=1e-8)
+    np.testing.assert_allclose(np.sort(np.abs(orbit.floquet)),
+                               [np.exp(-2 * mu * np.pi), 1.0], rtol=1e-8)
+    assert orbit.stable
 
 
 # ----------------------------------------------------------------------------- flutter

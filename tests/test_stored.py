@@ -1,23 +1,20 @@
-"""The demo system's continuation results shipped with the package (bayeshopf.simulators.stored)."""
+"""The demo system's continuation results shipped with the package (bayeshopf.simulators.stored,
+written by bayeshopf.simulators.ship)."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from bayeshopf.simulators import continue_from_hopf, get_system
+from bayeshopf.simulators import VANDERPOL, continue_from_hopf, get_system, ship
 from bayeshopf.simulators import stored as st
 from bayeshopf.simulators.recordings import N_ORBIT
-from bayeshopf.simulators.truth import FLUTTER_HELD_OUT, FLUTTER_PLAN
 
-#: Rounding: the arrays were computed in another process by the same code, and two runs
-#: differ at the ODE solver's tolerance (4e-12 m in the peak-to-peak of the smallest orbit,
-#: 5e-5 m, at the Hopf point)
+#: Rounding: the stored arrays may come from another process on another machine, and two
+#: runs differ at the ODE solver's tolerance (its rtol is 1e-10 a step)
 RTOL = 1e-9
-#: The states sampled along an orbit carry the solver's global error (its rtol is 1e-10
-#: a step), and another CPU's rounding moves them: by up to 2.6e-9 of the orbit's size
-#: between the file written on one machine and a fresh continuation on another, where
-#: μ, the periods and the initial states agreed to 1e-13
+#: The states sampled along an orbit carry the solver's global error as well, which another
+#: CPU's rounding moves by more than the end points
 ORBIT_RTOL = 1e-8
 
 
@@ -29,17 +26,18 @@ def flutter():
 def test_the_shipped_file_is_current(flutter):
     assert st.stored_diagram(flutter) is not None, (
         "bayeshopf/simulators/stored/flutter3dof.npz is missing or stale (its key is of other "
-        "sources or parameters): run `python -m bayeshopf.simulators.stored` and commit it")
+        "sources or parameters): run `python -m bayeshopf.simulators.ship` and commit it")
 
 
-def test_the_stored_diagram_and_orbits_are_a_fresh_continuations(flutter, monkeypatch):
+def test_the_stored_diagram_and_orbits_are_a_fresh_continuations(flutter):
     got = st.stored_diagram(flutter)
-    points = [(m, b, n) for m, b in (*FLUTTER_PLAN, *FLUTTER_HELD_OUT) for n in (N_ORBIT, None)]
+    points = ship.orbits_to_store(flutter)
+    assert {n for _, _, n in points} == {N_ORBIT, None}
     stored_orbits = [got.orbit_at(mu, branch, n_points=n) for mu, branch, n in points]
     for (mu, branch, _), s in zip(points, stored_orbits, strict=True):   # looked up, not solved
-        assert st.stored_orbit(flutter, got.branch(branch), mu, s.states.shape[0]) is not None
-    monkeypatch.setattr(st, "_stored", lambda system: None)    # from here on, computed
-    fresh = continue_from_hopf(flutter)
+        assert got.branch(branch).solved[(mu, s.states.shape[0])] is s
+    fresh = continue_from_hopf(flutter)                 # computed, never looked up
+    assert all(not b.solved for b in fresh.branches)
     assert got.criticality == fresh.criticality and got.n_steps == fresh.n_steps
     np.testing.assert_allclose(got.hopf.mu, fresh.hopf.mu, rtol=RTOL)
     np.testing.assert_allclose(got.hopf.eigenvector, fresh.hopf.eigenvector, rtol=RTOL)
@@ -73,6 +71,24 @@ def test_nothing_is_looked_up_for_another_system(flutter):
     # a right-hand side made at run time (a planted effect's closure): never looked up
     closure = replace(flutter, rhs=lambda x, mu, p: flutter.rhs(x, mu, p))
     assert st.system_key(closure) is None and st.stored_diagram(closure) is None
+    with pytest.raises(ValueError, match="not a module-level function"):
+        ship.write_stored(closure)
     # an orbit of the shipped system that was not stored
     branch = st.stored_diagram(flutter).branch("stable")
-    assert st.stored_orbit(flutter, branch, 16.123, N_ORBIT) is None
+    assert (16.123, N_ORBIT) not in branch.solved
+
+
+def test_what_is_written_is_what_is_read(tmp_path, monkeypatch):
+    # a system without stored orbits: its diagram alone, written and read back as it was
+    path = ship.write_stored(VANDERPOL, tmp_path)
+    assert path == tmp_path / "vanderpol.npz"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["vanderpol.npz"]   # nothing left over
+    assert st.stored_diagram(VANDERPOL) is None                # not in the package's folder
+    monkeypatch.setattr(st, "FOLDER", tmp_path)
+    got = st.stored_diagram(VANDERPOL)
+    fresh = continue_from_hopf(VANDERPOL)
+    assert got.hopf.mu == fresh.hopf.mu and got.n_steps == fresh.n_steps
+    for a, b in zip(got.branches, fresh.branches, strict=True):
+        assert a.kind == b.kind and not a.solved
+        for name in ("mu", "period", "x0", "orbits", "floquet", "stable"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))

@@ -7,15 +7,15 @@ from math import comb, log
 import numpy as np
 import pytest
 
-from bayeshopf.validation import Fold, HeldOut, LeaveOneOut
+from bayeshopf.validation import HeldOut, HeldOutFold, LeaveOneOut
 
 
-def _fold(measured: float, lo: float, hi: float, fold_mu: float) -> Fold:
+def _fold(measured: float, lo: float, hi: float, fold_mu: float) -> HeldOutFold:
     p = HeldOut(median=0.5 * (lo + hi), lo=lo, hi=hi, p_exists=1.0,
                 mu_fold=(fold_mu, fold_mu - 0.1, fold_mu + 0.1), mu0=(17.0, 16.9, 17.1),
                 base_log_median=log(0.5 * (lo + hi)),
                 base_log_var=((log(hi) - log(lo)) / 3.29) ** 2, away_sd=0.5)
-    return Fold(name="r", mu=15.0, branch="stable", measured=measured, measured_sd=0.0,
+    return HeldOutFold(name="r", mu=15.0, branch="stable", measured=measured, measured_sd=0.0,
                 predictions={"bayes": p})
 
 
@@ -253,7 +253,7 @@ def test_held_out_scale_recovers_a_planted_scale(s0):
     for ri, vi, ci in zip(r, v, c, strict=True):
         p = HeldOut(median=1.0, lo=0.9, hi=1.1, p_exists=1.0, mu_fold=(14.0,) * 3,
                     mu0=(17.0,) * 3, base_log_median=0.0, base_log_var=vi, away_sd=ci)
-        folds.append(Fold(name="r", mu=15.0, branch="stable", measured=float(np.exp(ri)),
+        folds.append(HeldOutFold(name="r", mu=15.0, branch="stable", measured=float(np.exp(ri)),
                           measured_sd=0.0, predictions={"bayes": p}))
     s_hat = LeaveOneOut(folds=tuple(folds), methods=("bayes",)).held_out_scale()
     grid = np.linspace(0.0, 1.0, 10001)
@@ -268,7 +268,7 @@ def test_held_out_scale_skips_folds_without_a_band():
     loo = _study(5)
     none = HeldOut(median=np.nan, lo=np.nan, hi=np.nan, p_exists=0.0, mu_fold=(14.0,) * 3,
                    mu0=(17.0,) * 3)
-    gone = Fold(name="x", mu=15.0, branch="unstable", measured=1.0, measured_sd=0.0,
+    gone = HeldOutFold(name="x", mu=15.0, branch="unstable", measured=1.0, measured_sd=0.0,
                 predictions={"bayes": none})
     assert LeaveOneOut(folds=loo.folds + (gone,), methods=("bayes",)).held_out_scale() == \
         pytest.approx(loo.held_out_scale(), rel=1e-9)

@@ -92,7 +92,7 @@ def test_map_free_pair_invariant_of_the_rig(post):
     at 17.3–17.5 m/s and predicts the unstable 16.5 m/s orbit from the pairs at
     14.9 and 15.7 m/s too large (docs/validation.md, "Why the unstable 16.5 m/s orbit"). The
     fit's curved unfolding bends through all three pairs instead, so its μ0 lies
-    below the line's (README, Limits): asserted here, so that a change of either
+    below the line's (docs/limits.md): asserted here, so that a change of either
     shows.
     """
     pairs = pair_invariants(post.features)
@@ -112,7 +112,7 @@ def test_a_saved_fit_keeps_the_control(post, tmp_path):
 
     import numpy as np
 
-    from bayeshopf.report import load_fit, save_hybrid
+    from bayeshopf.fit_folder import load_fit, save_hybrid
 
     save_hybrid(post, tmp_path / "fit")
     summary = json.loads((tmp_path / "fit" / "summary.json").read_text())

@@ -83,7 +83,7 @@ def test_at_scale_0_1_held_out_orbits_at_the_branch_ends_are_not_covered(loo_nar
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="6/7 needs bands 4.4x the legacy width at the default "
-                   "scale; at 0.1, 4/7 (README, Limits)")
+                   "scale; at 0.1, 4/7 (docs/limits.md)")
 def test_held_out_coverage_reaches_six_of_seven_within_twice_the_legacy_width(loo, loo_narrow):
     assert any(x.coverage("bayes") >= 6
                and x.summary()["bayes"]["mean_band_width"] <= 2 * LEGACY_WIDTH
@@ -189,6 +189,6 @@ def test_stored_wind_tunnel_notebook_has_outputs_of_a_full_run():
     assert all(c.get("execution_count") for c in run.code), "stored notebook not fully executed"
     assert not run.errors
     assert "fast mode: False" in run.text
-    assert "from bayeshopf.posterior import fit_hybrid" in run.code[0].source
-    assert 'fit_hybrid(rs, "subcritical"' in "".join(c.source for c in run.code)
+    assert "import bayeshopf as bh" in run.code[0].source
+    assert 'bh.fit(rs, settings, criticality="subcritical"' in "".join(c.source for c in run.code)
     assert run.n_images >= 7

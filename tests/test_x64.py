@@ -55,3 +55,18 @@ def test_computing_switches_float64_on(call: str, expect: str) -> None:
     r = _run(call + "\nimport numpy as np\nprint(jax.config.jax_enable_x64, np.asarray(out).dtype)")
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-2:] == ["True", expect]
+
+
+def test_the_first_float64_switch_sets_the_cpu_flags_before_any_computation():
+    """A user's script that computes with bayeshopf before any fit gets JAX's CPU flags."""
+    import subprocess
+    import sys
+
+    code = ("import os; os.environ.pop('XLA_FLAGS', None); "
+            "from bayeshopf.simulators.truth import flutter_experiment; "
+            "flutter_experiment(seed=0, fast=True); "
+            "from bayeshopf._xla import SINGLE_THREAD_EIGEN; "
+            "print(SINGLE_THREAD_EIGEN in os.environ.get('XLA_FLAGS', ''))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip().splitlines()[-1]
+    assert out == "True"

@@ -1,23 +1,32 @@
-"""``bayeshopf next``: where to measure next, from a saved fit (:mod:`bayeshopf.design`)."""
+"""``bayeshopf next``: where to measure next, from a saved fit (:mod:`bayeshopf.design`).
+
+The plotting code (Matplotlib) is imported only where the figure is drawn, so
+that ``next --no-figure`` does not load it.
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
 
+from bayeshopf import fit_folder
+from bayeshopf._format import format_interval, format_number
+from bayeshopf.cli import _schema
+from bayeshopf.cli._checks import check_ci, check_share
+from bayeshopf.design import Candidate, DesignResult, next_measurements, parse_candidates
+from bayeshopf.errors import DataError, FitError
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    """Add the ``next`` subcommand to the subparsers ``sub``."""
-    s = sub.add_parser(
-        "next", help="rank the next measurements by how much they shrink the fold, Hopf or "
-        "diagram intervals",
-        description="From a folder written by 'bayeshopf fit' (no refit), rank candidate "
-        "(airspeed, branch) measurements by the expected shrinkage of the target's interval: "
-        "the posterior reweighted by each simulated measurement (bayeshopf.design). Prints a "
-        "table and writes DIR/figures/next_<target>.png (gain against μ over the diagram).")
+DESCRIPTION = ("From a folder written by 'bayeshopf fit' (no refit), rank candidate "
+               "(airspeed, branch) measurements by the expected shrinkage of the target's "
+               "interval: the posterior reweighted by each simulated measurement "
+               "(bayeshopf.design). Prints a table and writes DIR/figures/next_<target>.png "
+               "(gain against μ over the diagram).")
+
+
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The options of ``next``."""
     s.add_argument("fit_dir", help="folder written by 'bayeshopf fit' or 'bayeshopf demo'")
     s.add_argument("--target", choices=("fold", "hopf", "diagram"), default="fold",
                    help="what to learn: the fold (default), the Hopf point, or the diagram")
@@ -28,42 +37,52 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument("--n", type=int, default=3, help="how many to recommend (default 3)")
     s.add_argument("--ci", type=float, default=0.9, help="interval mass (default 0.9)")
     s.add_argument("--seed", type=int, default=0, help="seed of the simulated measurements")
-    s.add_argument("--json", action="store_true", help="print the whole result as JSON")
+    s.add_argument("--min-p-exists", type=float, default=0.9, metavar="P",
+                   help="never recommend where the branch exists in fewer than this share of "
+                   "posterior draws (default 0.9); such candidates are listed as skipped")
+    s.add_argument("--min-amplitude", type=float, default=0.0, metavar="A",
+                   help="never recommend where the predicted amplitude (peak-to-peak, in the "
+                   "fit's amplitude unit) is below A (default 0: no limit)")
+    s.add_argument("--resolution", type=float, default=0.0, metavar="DMU",
+                   help="resolution in μ (the fit's μ unit): candidates closer than DMU merge "
+                   "(the best is kept) and a fold or Hopf gain below DMU is flagged as below "
+                   "the tunnel's resolution (default 0: none)")
+    s.add_argument("--json", action="store_true",
+                   help="print the whole result as JSON (schema of bayeshopf.cli._schema)")
     s.add_argument("--all", action="store_true", help="print every candidate, not only the best")
     s.add_argument("--no-figure", action="store_true", help="skip the figure")
     s.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
                    help="figure format (default png)")
-    return s
-
-
-def _fmt(x: float, digits: int = 4) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
 def run(args) -> int:
     """Run ``bayeshopf next``; returns the exit code."""
-    from bayeshopf.design import next_measurements, parse_candidates
-    from bayeshopf.errors import DataError
-    from bayeshopf.report import load_fit
-
-    if not 0 < args.ci < 1:
-        raise DataError(f"--ci {args.ci:g}: a probability mass between 0 and 1 expected (e.g. 0.9)")
+    check_ci(args.ci)
     if args.n < 1:
         raise DataError(f"--n {args.n}: at least 1 expected")
+    check_share(args.min_p_exists, "--min-p-exists")
+    for flag, v in (("--min-amplitude", args.min_amplitude), ("--resolution", args.resolution)):
+        if not (math.isfinite(v) and v >= 0):
+            raise DataError(f"{flag} {v:g}: a finite value of at least 0 expected")
     candidates = None
     if args.candidates is not None:
         try:
             candidates = parse_candidates(args.candidates)
         except ValueError as e:
             raise DataError(f"--candidates: {e}") from None
-    saved = load_fit(args.fit_dir)
+    saved = fit_folder.load_fit(args.fit_dir)
     print(f"next: reading the fit in {args.fit_dir} and ranking candidates "
           f"(target {args.target})", file=sys.stderr)
     fit = saved.posterior
+    if args.target == "fold" and "mu_fold" not in fit.samples:
+        raise FitError("--target fold: a subcritical fit expected (this one has no fold); "
+                       "use --target hopf or --target diagram")
     result = next_measurements(fit, target=args.target, candidates=candidates,
-                               branch=args.branch, n=args.n, ci=args.ci, seed=args.seed)
+                               branch=args.branch, n=args.n, ci=args.ci,
+                               min_p_exists=args.min_p_exists, min_amplitude=args.min_amplitude,
+                               resolution=args.resolution, seed=args.seed)
     if args.json:
-        print(json.dumps(result.to_json(), indent=1))
+        print(_schema.dumps(result_json(result, args.fit_dir)))
     else:
         _print(result, args.all)
     if not args.no_figure:
@@ -76,22 +95,54 @@ def run(args) -> int:
     return 0
 
 
+def _amplitude(c: Candidate, ci: float) -> dict | None:
+    """A candidate's predicted amplitude as a schema interval (``None`` when skipped)."""
+    m, lo, hi = c.amplitude
+    if not all(math.isfinite(x) for x in (m, lo, hi)):
+        return None
+    return _schema.interval_json(m, lo, hi, ci)
+
+
+def result_json(result: DesignResult, fit_dir) -> dict:
+    """The ranking in the command line's JSON schema (:mod:`bayeshopf.cli._schema`)."""
+    rank = {(c.mu, c.branch): i + 1 for i, c in enumerate(result.recommended)}
+
+    def row(c: Candidate) -> dict:
+        return {"rank": rank.get((c.mu, c.branch)), "mu": c.mu, "branch": c.branch,
+                "p_exists": c.p_exists, "amplitude": _amplitude(c, result.ci),
+                "width_after": c.width_after, "gain": c.gain, "gain_mcse": c.gain_mcse,
+                "ess": c.ess, "note": c.note or None, "skipped": c.skipped or None}
+
+    return _schema.document(
+        "next", ci=result.ci, units={"mu": result.mu_units,
+                                     "amplitude": result.amplitude_units, "frequency": "Hz"},
+        fit_dir=str(fit_dir), target=result.target, width_now=result.width_now,
+        min_p_exists=result.min_p_exists, min_amplitude=result.min_amplitude,
+        resolution=result.resolution,
+        recommended=[row(c) for c in result.recommended],
+        candidates=[row(c) for c in result.candidates])
+
+
 def _print(result, every: bool) -> None:
     mu_u = f" [{result.mu_units}]" if result.mu_units else ""
     amp_u = f" [{result.amplitude_units}]" if result.amplitude_units else ""
     what = {"fold": "fold", "hopf": "Hopf point", "diagram": "diagram band (mean)"}[result.target]
-    print(f"{what}: {100 * result.ci:.0f}% width now {_fmt(result.width_now)}"
+    print(f"{what}: {100 * result.ci:.0f}% width now {format_number(result.width_now)}"
           f"{amp_u if result.target == 'diagram' else mu_u}")
-    rows = result.candidates if every else result.recommended
+    rows = result.ranked() if every else result.recommended
     print(f"{'rank':>4} {'mu' + mu_u:>12} {'branch':>9} {'P(exists)':>9} "
-          f"{'amplitude' + amp_u:>14} {'band':>22} {'width after':>11} {'gain':>9}")
+          f"{'amplitude' + amp_u:>14} {'band':>22} {'width after':>11} {'gain':>9} "
+          f"{'± MC se':>9}")
     rank = {(c.mu, c.branch): i + 1 for i, c in enumerate(result.recommended)}
     for c in rows:
         r = rank.get((c.mu, c.branch))
-        band = f"[{_fmt(c.amplitude[1])}, {_fmt(c.amplitude[2])}]"
-        print(f"{r if r else '':>4} {c.mu:>12.4g} {c.branch:>9} {c.p_exists:>9.2f} "
-              f"{_fmt(c.amplitude[0]):>14} {band:>22} {_fmt(c.width_after):>11} "
-              f"{_fmt(c.gain, 3):>9}" + (f"  skipped: {c.skipped}" if c.skipped else ""))
+        m, lo, hi = format_interval(*c.amplitude)
+        gain = "no gain" if c.note.startswith("no gain") else format_number(c.gain)
+        notes = "; ".join(x for x in ((f"skipped: {c.skipped}" if c.skipped else ""),
+                                      "" if c.note.startswith("no gain") else c.note) if x)
+        print(f"{r if r else '':>4} {c.mu:>12g} {c.branch:>9} {c.p_exists:>9.2f} "
+              f"{m:>14} {'[' + lo + ', ' + hi + ']':>22} {format_number(c.width_after):>11} "
+              f"{gain:>9} {format_number(c.gain_mcse):>9}" + (f"  {notes}" if notes else ""))
     if not every:
         parts = []
         for b in ("stable", "unstable"):
@@ -107,7 +158,8 @@ def _print(result, every: bool) -> None:
             if runs:
                 parts.append(f"{b} at μ {', '.join(runs)}")
         if parts:
-            print(f"skipped (the branch may not exist there): {'; '.join(parts)}")
+            print(f"skipped (the branch may not exist there, or its orbit is below "
+                  f"--min-amplitude): {'; '.join(parts)}")
     low = [c for c in result.recommended if c.ess < 20]
     if low:
         print(f"warning: next: the importance weights of {len(low)} recommended candidate(s) "

@@ -2,7 +2,8 @@
 
 Writes ``report.json``, ``report.md`` and ``figures/`` into ``--out``,
 atomically (a temporary sibling folder renamed into place). Bad input is
-reported by :func:`bayeshopf.cli.main.main` as one line with exit code 2.
+reported by :func:`bayeshopf.cli.main.main` as one line with exit code 2. The
+plotting code (Matplotlib) is imported only where the figures are drawn.
 """
 
 from __future__ import annotations
@@ -10,25 +11,33 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
-import uuid
 from pathlib import Path
 
-from bayeshopf._atomic import swap_in
+import numpy as np
+
+from bayeshopf import discrepancy
+from bayeshopf._atomic import new_folder
+from bayeshopf._format import format_interval, format_values
+from bayeshopf.cli._checks import check_out
+from bayeshopf.data import load_recordings
+from bayeshopf.discrepancy.analysis import stage_rows
+from bayeshopf.errors import OutputError
+from bayeshopf.fit_folder import check_output_folder, json_ready
+from bayeshopf.simulators import get_system
+
+DESCRIPTION = ("Compare LCO recordings with a simulator's periodic orbits, locate the "
+               "mismatch, give every candidate missing term (stiffness, freeplay, friction, "
+               "damping nonlinearities per coordinate) a posterior probability and a "
+               "coefficient with a 90% interval, add the most probable one and report the fit "
+               "before and after, with a one-sentence verdict. A simulator that declares "
+               "uncertain parameters (flutter3dof) has them calibrated first, as nuisance "
+               "parameters: the verdict then tells 'the parameters are off' from 'a term is "
+               "missing', and the fit is shown nominal, calibrated and calibrated with the "
+               "term.")
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    """Add the ``discrepancy`` subcommand to the subparsers ``sub``."""
-    s = sub.add_parser(
-        "discrepancy", help="locate and name the physics a simulator lacks",
-        description="Compare LCO recordings with a simulator's periodic orbits, locate the "
-        "mismatch, give every candidate missing term (stiffness, freeplay, friction, damping "
-        "nonlinearities per coordinate) a posterior probability and a coefficient with a 90% "
-        "interval, add the most probable one and report the fit before and after, with a "
-        "one-sentence verdict. A simulator that declares uncertain parameters (flutter3dof) "
-        "has them calibrated first, as nuisance parameters: the verdict then tells 'the "
-        "parameters are off' from 'a term is missing', and the fit is shown nominal, "
-        "calibrated and calibrated with the term.")
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The options of ``discrepancy``."""
     s.add_argument("data", help="recordings: an interchange folder or CBC .mat files")
     s.add_argument("--simulator", required=True,
                    help="flutter3dof, vanderpol, or package.module:attr of your own System")
@@ -42,12 +51,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument("--no-figures", action="store_true", help="write no figures")
     s.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     s.add_argument("--quiet", action="store_true", help="no progress bars")
-    return s
 
 
 def _json_default(o):
-    import numpy as np
-
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -57,43 +63,35 @@ def _json_default(o):
 
 def write_report(report, out: str | os.PathLike[str], *, force: bool = False,
                  figures: bool = True) -> Path:
-    """Write ``report.json``, ``report.md`` and ``figures/`` into ``out`` atomically."""
-    from bayeshopf.errors import OutputError
-    from bayeshopf.report import check_output_folder, json_ready
+    """Write ``report.json``, ``report.md`` and ``figures/`` into ``out`` atomically.
 
+    Raises:
+        OutputError: When ``out`` is a file, or not empty and ``force`` is false, or
+            cannot be written.
+    """
     out = check_output_folder(out, force)
-    tag = uuid.uuid4().hex[:8]
-    tmp = out.parent / f".{out.name}.discrepancy-{tag}"
     try:
-        tmp.mkdir(parents=True)
-        data = json.loads(json.dumps(report.to_json(), default=_json_default))
-        (tmp / "report.json").write_text(json.dumps(json_ready(data), indent=2, allow_nan=False)
-                                         + "\n", encoding="utf-8")
-        (tmp / "report.md").write_text(report.to_markdown(), encoding="utf-8")
-        if figures:
-            from bayeshopf.plotting.discrepancy import plot_discrepancy
+        with new_folder(out) as tmp:
+            data = json.loads(json.dumps(report.to_json(), default=_json_default))
+            (tmp / "report.json").write_text(
+                json.dumps(json_ready(data), indent=2, allow_nan=False) + "\n",
+                encoding="utf-8")
+            (tmp / "report.md").write_text(report.to_markdown(), encoding="utf-8")
+            if figures:
+                from bayeshopf.plotting.discrepancy import plot_discrepancy
 
-            plot_discrepancy(report, tmp / "figures")
-        swap_in(tmp, out, tag)
+                plot_discrepancy(report, tmp / "figures")
     except OSError as exc:
         raise OutputError(f"{out}: cannot be written ({type(exc).__name__}: {exc})") from exc
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 
 def run(args) -> int:
     """Run ``bayeshopf discrepancy``; errors propagate as ``BayesHopfError``."""
-    from bayeshopf.data import load_recordings
-    from bayeshopf.discrepancy import analyse
-    from bayeshopf.report import check_output_folder
-    from bayeshopf.simulators import get_system
-
-    check_output_folder(args.out, args.force)
+    check_out(args.out, args.force, "replace it")
     system = get_system(args.simulator)
     rs = load_recordings(args.data)
-    report = analyse(rs, system, seed=args.seed, hybrid=not args.no_hybrid,
+    report = discrepancy.analyse(rs, system, seed=args.seed, hybrid=not args.no_hybrid,
                      progress=not args.quiet, calibrate=False if args.no_calibration else None)
     write_report(report, args.out, force=args.force, figures=not args.no_figures)
     d = report.to_json()
@@ -104,45 +102,46 @@ def run(args) -> int:
     return 0
 
 
+def _coefficient(co: dict, pad: int = 11) -> str:
+    """A term's coefficient as ``median [lo, hi] units`` (digits that show the width)."""
+    m, a, b = format_interval(co["median"], *co["ci90"])
+    return f"{m:>{pad}s} [{a:>{pad}s}, {b:>{pad}s}] {co['units']}"
+
+
 def _single_term_lines(d: dict) -> list[str]:
     """What the command prints without calibration: the verdict and the best terms."""
     lines = [d["verdict"]["sentence"],
              f"{'model':30s} {'probability':>11s} {'median':>11s} {'90% interval':>26s}"]
     for c in d["candidates"][:5]:
         co = c["coefficient"]
-        if co is None:
-            lines.append(f"{c['name']:30s} {c['probability']:11.3g}")
-        else:
-            lines.append(f"{c['name']:30s} {c['probability']:11.3g} {co['median']:11.4g} "
-                         f"[{co['ci90'][0]:11.4g}, {co['ci90'][1]:11.4g}] {co['units']}")
+        lines.append(f"{c['name']:30s} {c['probability']:11.3g}"
+                     + ("" if co is None else f" {_coefficient(co)}"))
     return lines
 
 
 def _calibrated_lines(d: dict) -> list[str]:
     """What the command prints with calibration: verdict, parameters, models, fit, remainder."""
-    from bayeshopf.discrepancy.analysis import stage_rows
-
     v = d["verdict"]
     lines = [v["sentence"], "",
              f"uncertain parameters ({d['parameters']['model']}):",
              f"{'parameter':10s} {'nominal':>11s} {'median':>11s}   {'90% interval':26s} "
              f"{'shift':>7s}  off"]
     for p in d["parameters"]["table"]:
-        iv = f"[{p['ci90'][0]:.5g}, {p['ci90'][1]:.5g}]"
-        lines.append(f"{p['name']:10s} {p['nominal']:11.5g} {p['median']:11.5g}   {iv:26s} "
+        lo, hi = p["ci90"]
+        nominal, m, a, b = format_values([p["nominal"], p["median"], lo, hi], hi - lo)
+        lines.append(f"{p['name']:10s} {nominal:>11s} {m:>11s}   "
+                     f"{'[' + a + ', ' + b + ']':26s} "
                      f"{100 * p['shift']:+6.2f}%  {'yes' if p['off'] else ''}")
     lines += ["", f"{'model':30s} {'probability':>11s} {'median':>11s} {'90% interval':>26s}"]
     for m in d["models"][:7]:
         co = m["coefficient"]
         if m.get("coefficients"):                                 # a pair of terms
             lines.append(f"{m['name']:30s} {m['probability']:11.3g} " + "; ".join(
-                f"{c['name']} {c['median']:.4g} [{c['ci90'][0]:.4g}, {c['ci90'][1]:.4g}]"
-                f" {c['units']}" for c in m["coefficients"]))
+                f"{c['name']} {_coefficient(c, 0)}" for c in m["coefficients"]))
         elif co is None:
             lines.append(f"{m['label']:30s} {m['probability']:11.3g}")
         else:
-            lines.append(f"{m['name']:30s} {m['probability']:11.3g} {co['median']:11.4g} "
-                         f"[{co['ci90'][0]:11.4g}, {co['ci90'][1]:11.4g}] {co['units']}")
+            lines.append(f"{m['name']:30s} {m['probability']:11.3g} {_coefficient(co)}")
     titles, rows = stage_rows(d)
     keep = ("amplitude error", "Hopf point", "fold", "chi²")
     rows = [(q, cells) for q, cells in rows if q.startswith(keep)]

@@ -10,18 +10,33 @@ line with exit code 2.
 from __future__ import annotations
 
 import argparse
+import json
+import math
 from pathlib import Path
 
+from bayeshopf._atomic import replacing
+from bayeshopf.cli._checks import check_out
+from bayeshopf.discrepancy.effects import effect_names, simulate_with_effect, truth_points
+from bayeshopf.errors import OutputError
+from bayeshopf.simulators import (
+    SimulationError,
+    bifurcation_diagram,
+    get_system,
+    simulate_recordings,
+    simulation_info,
+    write_simulation,
+)
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    """Add the ``simulate`` subcommand to the subparsers ``sub``."""
-    s = sub.add_parser(
-        "simulate", help="simulated LCO recordings of a known system (vanderpol, flutter3dof)",
-        description="Continue the periodic orbits of a known system from its Hopf point and "
-        "write recordings of stable and unstable LCOs as control-based continuation measures "
-        "them (the open-loop orbit plus sensor noise and offsets) to an interchange folder "
-        "that 'bayeshopf fit' reads. Without --mu, a default set across the branches is "
-        "recorded (flutter3dof: 4 stable + 4 unstable LCOs between the fold and the Hopf point).")
+DESCRIPTION = ("Continue the periodic orbits of a known system from its Hopf point and write "
+               "recordings of stable and unstable LCOs as control-based continuation measures "
+               "them (the open-loop orbit plus sensor noise and offsets) to an interchange "
+               "folder that 'bayeshopf fit' reads. Without --mu, a default set across the "
+               "branches is recorded (flutter3dof: 4 stable + 4 unstable LCOs between the fold "
+               "and the Hopf point).")
+
+
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The options of ``simulate``."""
     s.add_argument("system", help="vanderpol, flutter3dof, or package.module:attr of your own "
                    "bayeshopf.simulators.System")
     s.add_argument("--out", required=True, help="output folder (refused if not empty)")
@@ -47,12 +62,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
     s.add_argument("--truth-out", default=None, metavar="FILE",
                    help="write the hidden effect and the true Hopf point and fold to this JSON "
                    "file (with --effect nothing about the truth is written beside the data)")
-    return s
 
 
 def _parse_offsets(items: list[str]) -> dict[str, float]:
-    from bayeshopf.simulators import SimulationError
-
+    """``--offset CHANNEL=VALUE ...`` as ``{channel: value}``."""
     out: dict[str, float] = {}
     for item in items:
         name, sep, value = item.partition("=")
@@ -69,26 +82,10 @@ def _parse_offsets(items: list[str]) -> dict[str, float]:
 
 def run(args) -> int:
     """Run ``bayeshopf simulate``; errors propagate as ``BayesHopfError``."""
-    from bayeshopf.errors import OutputError
-    from bayeshopf.simulators import (
-        bifurcation_diagram,
-        get_system,
-        simulate_recordings,
-        simulation_info,
-        write_simulation,
-    )
-
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"{out}: expected an output folder; found an existing file")
-    if out.is_dir() and any(out.iterdir()) and not args.force:
-        raise OutputError(f"{out}: output folder is not empty; expected a new or empty folder "
-                          "(use --force to replace it)")
+    out = check_out(args.out, args.force, "replace it")
     system = get_system(args.system)
     offsets = _parse_offsets(args.offset)
     if args.branch is not None and args.mu is None:
-        from bayeshopf.simulators import SimulationError
-
         raise SimulationError("--branch given without --mu; give the mu of each recording")
     if args.effect is not None or args.effect_value is not None or args.truth_out:
         return _run_effect(args, system, offsets, out)
@@ -123,18 +120,17 @@ def run(args) -> int:
 
 def _run_effect(args, system, offsets, out: Path) -> int:
     """``--effect``: recordings with a hidden effect; the truth only in ``--truth-out``."""
-    import json
-
-    from bayeshopf._atomic import replacing
-    from bayeshopf.discrepancy.effects import simulate_with_effect, truth_points
-    from bayeshopf.errors import OutputError
-    from bayeshopf.simulators import SimulationError, write_simulation
-
     if args.effect is None or args.effect_value is None:
         raise SimulationError("--effect and --effect-value go together; expected both, got "
                               + ("--effect" if args.effect else "--effect-value"
                                  if args.effect_value is not None else "--truth-out")
                               + " alone")
+    names = effect_names(system)
+    if args.effect not in names:
+        raise SimulationError(f"--effect {args.effect}: one of {', '.join(names) or '(none)'} "
+                              f"expected for {system.name}; found {args.effect!r}")
+    if not math.isfinite(args.effect_value):
+        raise SimulationError(f"--effect-value {args.effect_value}: a finite number expected")
     truth_path = Path(args.truth_out) if args.truth_out else None
     if truth_path is not None:
         if truth_path.exists() and not args.force:

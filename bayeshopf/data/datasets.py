@@ -19,7 +19,8 @@ import hashlib
 import os
 from pathlib import Path
 
-from bayeshopf.data.io import _one_line, read_cbc_mat
+from bayeshopf.data._common import one_line as _one_line
+from bayeshopf.data.matfile import read_cbc_mat
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import DataError
 
@@ -139,7 +140,7 @@ def flutter_cbc(
 
     Four stable-branch LCOs (14.9, 15.6, 16.5, 17.3 m/s) and three unstable-branch
     LCOs stabilised by control-based continuation (14.9, 15.7, 16.5 m/s); see
-    :func:`~bayeshopf.data.io.read_cbc_mat` for channels and units. The data are
+    :func:`~bayeshopf.data.matfile.read_cbc_mat` for channels and units. The data are
     taken from, in order: ``path``; the folder named by the environment variable
     ``BAYESHOPF_FLUTTER_CBC``; a download (:func:`download_flutter_cbc`) when
     ``download`` is true. Local files are checked against the pinned

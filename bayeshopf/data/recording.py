@@ -4,7 +4,14 @@ A :class:`Recording` is one measured limit-cycle oscillation held at a fixed
 value of the bifurcation parameter μ: uniformly sampled times ``t`` (with gaps
 where a reader left out samples that had no reading) and named channels with
 units. A :class:`RecordingSet` groups recordings that share their
-channels and names the planar pair (z1, z2) of the paper's map U12.
+channels (each channel in one unit across the set) and names the planar pair
+(z1, z2) of the paper's map U12.
+
+A NaN sample means "no reading", as for the readers (:mod:`bayeshopf.data.io`):
+a :class:`Recording` leaves out every sample at which ``t`` or a channel is NaN,
+with its time stamp, and counts it in :attr:`Recording.dropped`. The harmonic
+features are least-squares fits over the samples that remain
+(:mod:`bayeshopf.features.harmonics`), so a gap needs no filling.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from bayeshopf.data.convergence import Convergence
 from bayeshopf.errors import DataError
 
 Branch = Literal["stable", "unstable"]
@@ -45,8 +53,11 @@ class Recording:
         branch: ``"stable"`` or ``"unstable"``.
         name: Short name, normally the file name (reported in summaries).
         source: Where the recording came from (a path or a description).
-        dropped: Samples the reader left out because a sensor had no reading
-            (:class:`~bayeshopf.data.rig.ChannelSpec`); they are not in ``t``.
+        dropped: Samples left out because a sensor had no reading (a reader's
+            :class:`~bayeshopf.data.rig.ChannelSpec`, an empty cell, or a NaN in
+            ``t`` or a channel given here); they are not in ``t``.
+        convergence: How the CBC controller's iteration ended on this recording
+            (:mod:`bayeshopf.data.convergence`), or ``None`` when not recorded.
     """
 
     t: np.ndarray
@@ -57,15 +68,16 @@ class Recording:
     name: str
     source: str = ""
     dropped: int = 0
+    convergence: Convergence | None = None
 
     def __post_init__(self) -> None:
         where = self.name or self.source or "recording"
-        t = _readonly(self.t)
-        if t.ndim != 1 or t.size < 3:
+        t = np.asarray(self.t, dtype=np.float64)
+        if t.ndim != 1:
             raise DataError(f"{where}: t must be a 1-D array of >= 3 samples; got shape {t.shape}")
         chans = {}
         for k, v in self.channels.items():
-            v = _readonly(v)
+            v = np.asarray(v, dtype=np.float64)
             if v.shape != t.shape:
                 raise DataError(
                     f"{where}: channel '{k}' must have shape {t.shape} matching t; got {v.shape}"
@@ -73,6 +85,23 @@ class Recording:
             chans[k] = v
         if not chans:
             raise DataError(f"{where}: expected at least one channel besides t; found none")
+        gap = np.isnan(t)
+        for v in chans.values():
+            gap |= np.isnan(v)
+        n_gap = int(gap.sum())
+        if n_gap:
+            keep = ~gap
+            t = t[keep]
+            chans = {k: v[keep] for k, v in chans.items()}
+        t = _readonly(t)
+        chans = {k: _readonly(v) for k, v in chans.items()}
+        if t.size < 3:
+            extra = f" with a reading ({n_gap} NaN left out)" if n_gap else ""
+            raise DataError(f"{where}: t must be a 1-D array of >= 3 samples{extra}; got "
+                            f"shape {t.shape}")
+        if self.convergence is not None and not isinstance(self.convergence, Convergence):
+            raise DataError(f"{where}: convergence must be a Convergence or None; found "
+                            f"{type(self.convergence).__name__}")
         if self.branch not in BRANCHES:
             raise DataError(
                 f"{where}: branch must be 'stable' or 'unstable'; found {self.branch!r}"
@@ -88,7 +117,13 @@ class Recording:
                 or self.dropped < 0:
             raise DataError(f"{where}: dropped must be a non-negative integer; "
                             f"found {self.dropped!r}")
-        object.__setattr__(self, "dropped", int(self.dropped))
+        object.__setattr__(self, "dropped", int(self.dropped) + n_gap)
+
+    def __repr__(self) -> str:
+        chans = ", ".join(f"{k} [{u}]" if u else k for k, u in self.units.items())
+        gaps = f", {self.dropped} left out" if self.dropped else ""
+        return (f"Recording({self.name!r}, {self.branch}, mu={self.mu:g}, {self.t.size} samples "
+                f"over {self.duration:.4g} s{gaps}; {chans})")
 
     @cached_property
     def dt(self) -> float:
@@ -154,6 +189,11 @@ class Recording:
 class RecordingSet:
     """Recordings that share channels, with the planar pair (z1, z2) named.
 
+    A channel's stated unit must be the same in every recording (an empty unit,
+    not stated, goes with any); readers convert to one unit per channel
+    (:func:`bayeshopf.data.units.harmonise`), and a set built from recordings
+    in different units is refused.
+
     Attributes:
         recordings: The recordings, in a fixed order.
         planar: Names of the planar pair (z1, z2) used by the map U12. z1 is the
@@ -196,12 +236,41 @@ class RecordingSet:
                 if self.control not in r.channels:
                     raise DataError(f"{r.name}: control channel '{self.control}' expected; "
                                     f"found channels {', '.join(r.channels)}")
+        first: dict[str, tuple[str, str]] = {}
+        for r in recs:
+            for c, u in r.units.items():
+                if not u:
+                    continue
+                if c not in first:
+                    first[c] = (u, r.name)
+                elif first[c][0] != u:
+                    raise DataError(
+                        f"{r.name}: channel '{c}' in '{first[c][0]}' expected (as in "
+                        f"{first[c][1]}); found '{u}' (convert first: "
+                        "bayeshopf.data.units.harmonise)"
+                    )
         object.__setattr__(self, "recordings", recs)
         object.__setattr__(self, "planar", pair)
         object.__setattr__(self, "extra", MappingProxyType(dict(self.extra)))
 
     def __len__(self) -> int:
         return len(self.recordings)
+
+    def __repr__(self) -> str:
+        r0 = self.recordings[0]
+        chans = ", ".join(f"{k} [{u}]" if u else k for k, u in r0.units.items())
+        mus = self.mus
+        units = f" {self.mu_units}" if self.mu_units else ""
+        n_unstable = int(self.is_unstable.sum())
+        control = f", control {self.control}" if self.control else ""
+        return (f"RecordingSet({self.size_text}: {len(self) - n_unstable} stable, {n_unstable} "
+                f"unstable; {self.mu_label} {mus.min():g} to {mus.max():g}{units}; planar "
+                f"({self.planar[0]}, {self.planar[1]}){control}; channels {chans})")
+
+    @property
+    def size_text(self) -> str:
+        """``"1 recording"`` or ``"N recordings"``."""
+        return f"{len(self)} recording{'' if len(self) == 1 else 's'}"
 
     def __iter__(self) -> Iterator[Recording]:
         return iter(self.recordings)

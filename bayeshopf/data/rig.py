@@ -16,6 +16,11 @@ beside the data as ``rig.toml``::
     mu_units = "m/s"
     planar = ["h", "alpha"]
 
+    [convergence]                   # optional: how the CBC controller's iteration ended
+    success = "success"
+    error = "error1"
+    tolerance = "error_tol"
+
     [channels.h]
     row = 0                         # row of the 'data' matrix (0-based)
     unit = "m"
@@ -40,7 +45,9 @@ no uniform sampling (:mod:`bayeshopf.features.harmonics`).
 **Top-level keys** (all optional except ``channels``): ``name``,
 ``data_variable`` (``"data"``: the matrix whose rows are channels),
 ``data_rows`` (the number of rows that matrix must have), ``time_variable``
-(``"time"``; ``""`` for none), ``sample_rate`` (Hz; used when a file has no time
+(``"time"``; ``""`` for none), ``time_unit`` (the unit of the time variable,
+``"s"`` by default; ``"ms"`` etc. are converted to seconds with pint,
+:mod:`bayeshopf.data.units`), ``sample_rate`` (Hz; used when a file has no time
 variable, and by ``time_mismatch = "sample_rate"``), ``time_mismatch``
 (``"refuse"``, ``"decimate"``: when the time vector holds k times as many
 stamps as ``data`` has samples, every k-th stamp; ``"sample_rate"``: ignore the
@@ -52,11 +59,17 @@ its groups joined by ``.`` give μ, so ``'v(\d+)_(\d+)'`` reads 15.6 from
 planar pair; by default the first two channels) and ``control`` (the channel
 that holds the control-based continuation's control output, the actuator
 command; its residual fundamental is a measured input of the model, see
-:mod:`bayeshopf.model.collapsed`; leave it out when the rig records none).
+:mod:`bayeshopf.model.collapsed`; leave it out when the rig records none) and
+``convergence`` (a table naming the variables that say whether the CBC
+controller converged: ``success``, ``error``, ``tolerance``, ``branches``; see
+:mod:`bayeshopf.data.convergence`).
 
 **Channel keys**: ``row``, ``variable`` (default the ``data_variable``; a
 vector variable needs no ``row``), ``unit``, ``scale``, ``offset``, ``angle``,
-``turn``, ``sentinel``, ``sentinel_tolerance`` and ``missing``.
+``turn``, ``sentinel``, ``sentinel_tolerance`` and ``missing``. A channel's
+``unit`` is its unit after scaling; it must be one pint knows, and recordings
+read with the description are given in it (:mod:`bayeshopf.data.units`). A NaN
+sample is always "no reading"; ``missing = ["nan"]`` adds infinite values.
 
 The flutter rig of the paper's authors is the built-in description
 :meth:`RigDescription.flutter_cbc` (``bayeshopf/data/flutter_cbc.toml``).
@@ -79,6 +92,7 @@ from typing import Any
 
 import numpy as np
 
+from bayeshopf.data.convergence import ConvergenceSpec
 from bayeshopf.errors import DataError
 
 __all__ = ["RIG_FILE", "ChannelSpec", "RigDescription", "find_rig", "load_rig"]
@@ -262,6 +276,9 @@ class RigDescription:
         mu_units: Unit of μ.
         planar: The planar pair (z1, z2); ``None`` means the first two channels.
         control: The channel of the control output (actuator command), or ``None``.
+        time_unit: Unit of the time variable (converted to seconds).
+        convergence: Where the files record the CBC controller's convergence,
+            or ``None``.
         source: Where the description was read from (for messages).
     """
 
@@ -278,6 +295,8 @@ class RigDescription:
     mu_units: str = ""
     planar: tuple[str, str] | None = None
     control: str | None = None
+    time_unit: str = "s"
+    convergence: ConvergenceSpec | None = None
     source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -330,6 +349,10 @@ class RigDescription:
             except re.error as exc:
                 _fail(where, f"'mu_pattern' must be a regular expression; {self.mu_pattern!r} "
                       f"is not ({exc})")
+        _text(where, "time_unit", self.time_unit, allow_empty=False)
+        if self.convergence is not None and not isinstance(self.convergence, ConvergenceSpec):
+            _fail(where, f"'convergence' must be a ConvergenceSpec (a [convergence] table); "
+                  f"found {self.convergence!r}")
         _text(where, "mu_label", self.mu_label)
         _text(where, "mu_units", self.mu_units)
         pair = self.planar if self.planar is not None else tuple(names[:2])
@@ -366,6 +389,7 @@ class RigDescription:
         """Every variable a file of this rig is read for."""
         names = [c.variable or self.data_variable for c in self.channels]
         names += [v for v in (self.time_variable, self.mu_variable) if v]
+        names += list(self.convergence.variables) if self.convergence else []
         return tuple(dict.fromkeys(names))
 
     def mu_from_name(self, file_name: str) -> float | None:
@@ -425,6 +449,20 @@ class RigDescription:
             except DataError as exc:
                 raise DataError(f"{where}: {exc}") from None
         kw = {k: v for k, v in d.items() if k != "channels"}
+        if "convergence" in kw:
+            conv = kw["convergence"]
+            keys = {f.name for f in fields(ConvergenceSpec)}
+            if not isinstance(conv, dict) or any(k not in keys for k in conv):
+                bad = [k for k in conv if k not in keys] if isinstance(conv, dict) else [conv]
+                _fail(where, f"[convergence]: keys among {', '.join(sorted(keys))} expected; "
+                      f"found {bad[0]!r}")
+            conv = dict(conv)
+            if isinstance(conv.get("branches"), list):
+                conv["branches"] = tuple(conv["branches"])
+            try:
+                kw["convergence"] = ConvergenceSpec(**conv)
+            except DataError as exc:
+                raise DataError(f"{where}: {exc}") from None
         if isinstance(kw.get("planar"), list):
             kw["planar"] = tuple(kw["planar"])
         try:
@@ -479,6 +517,8 @@ class RigDescription:
                 v = ""                    # no time variable (the default is "time")
             if f.name in ("channels", "source") or v is None or v == f.default:
                 continue
+            if isinstance(v, ConvergenceSpec):
+                v = v.to_dict()
             out[f.name] = list(v) if isinstance(v, tuple) else v
         out["channels"] = {c.name: c.to_dict() for c in self.channels}
         return out

@@ -41,7 +41,6 @@ import numpy as np
 
 from bayeshopf.data.recording import Recording, RecordingSet
 from bayeshopf.errors import DataError
-from bayeshopf.model import normal_form
 
 __all__ = [
     "DEMO_STABLE_MU",
@@ -104,6 +103,26 @@ def _scalar(name: str, value, *, positive: bool = False, nonneg: bool = False) -
         _fail(f"{name} must be >= 0; got {x}")
     return x
 
+
+
+def _lco_radius(mu: np.ndarray, mu0: float, a2: float, stable: bool) -> np.ndarray:
+    """``r = √((a2 ± √(a2² + 4(μ−μ0)))/2)``, ``nan`` where the branch does not exist.
+
+    Written here, apart from the model (:mod:`bayeshopf.model.normal_form`), so
+    that planted data are an independent reference; the roots are taken in the
+    forms that stay accurate near the Hopf point (``−2Δ/(a2 + √D)`` for the
+    unstable branch), and the fold counts as on both branches within rounding.
+    """
+    delta = mu - mu0
+    disc = a2**2 + 4.0 * delta
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if stable:
+            r2 = (a2 + sq) / 2.0 if a2 > 0 else 2.0 * delta / (sq - a2)
+        else:
+            r2 = -2.0 * delta / (a2 + sq) if a2 > 0 else np.full_like(delta, -1.0)
+    ok = (disc >= -64.0 * np.finfo(np.float64).eps * (a2**2 + 4.0 * abs(mu0))) & (r2 > 0.0)
+    return np.where(ok, np.sqrt(np.where(ok, r2, 1.0)), np.nan)
 
 @dataclass(frozen=True, eq=False)
 class PlantedHopf:
@@ -170,7 +189,7 @@ class PlantedHopf:
         """Fold of cycles ``μ_SN = μ0 − a2²/4`` (subcritical), else ``None``."""
         if self.a2 <= 0:
             return None
-        return float(normal_form.fold_point(self.mu0, self.a2))
+        return float(self.mu0 - self.a2**2 / 4.0)
 
     def branch_range(self, branch: str) -> tuple[float, float]:
         """Interval ``(lo, hi)`` of μ where ``branch`` has an LCO (ends may be excluded).
@@ -202,9 +221,8 @@ class PlantedHopf:
         """
         if branch not in ("stable", "unstable"):
             _fail(f"branch must be 'stable' or 'unstable'; got {branch!r}")
-        sign = normal_form.STABLE if branch == "stable" else normal_form.UNSTABLE
-        r = normal_form.lco_radius(np.asarray(mu, dtype=np.float64), self.mu0, self.a2, sign)
-        return np.asarray(r, dtype=np.float64)
+        return _lco_radius(np.asarray(mu, dtype=np.float64), self.mu0, self.a2,
+                           branch == "stable")
 
     def angular_frequency(self, r) -> np.ndarray:
         """``ω(r) = ω0 (1 + κ r²)`` in rad/s."""

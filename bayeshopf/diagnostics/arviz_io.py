@@ -9,7 +9,7 @@ this module, so a move to 1.x changes this file only; the saved
 ``xarray.open_datatree`` opens as well.
 
 ArviZ is imported on first use (:func:`arviz`), not with this module: its
-import takes about 3 s, which the sampler starts in a background thread beside
+import takes seconds, which the sampler starts in a background thread beside
 its chains (:func:`bayeshopf._preload.start`).
 """
 
@@ -185,14 +185,6 @@ def compare_with_loo(log_liks: dict, held_out: dict | None = None,
 def compare(log_liks: dict) -> dict:
     """ArviZ ``compare`` of models by PSIS-LOO; returns name -> rank, elpd, dse, weight."""
     return compare_with_loo(log_liks)[0]
-
-
-def rhat_ess(chains: dict) -> dict:
-    """R̂ and bulk ESS per site from draws by chain ``(n_chains, n_draws)`` (scalar sites)."""
-    az = arviz()
-    ds = az.convert_to_dataset({k: np.asarray(v) for k, v in chains.items()})
-    rhat, ess = az.rhat(ds), az.ess(ds, method="bulk")
-    return {k: (float(rhat[k]), float(ess[k])) for k in chains}
 
 
 def chains_to_inference_data(posterior: dict, *, observed: dict | None = None,

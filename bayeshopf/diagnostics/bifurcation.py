@@ -1,7 +1,7 @@
 """Bifurcation diagram with credible bands: amplitude against μ on each branch.
 
-Both records convert to xarray (:meth:`BifurcationDiagram.to_dataset`) and
-pandas (:meth:`BifurcationDiagram.to_dataframe`).
+Both records convert to xarray (:meth:`DiagramBands.to_dataset`) and
+pandas (:meth:`DiagramBands.to_dataframe`).
 """
 
 from __future__ import annotations
@@ -80,8 +80,11 @@ class BranchBand:
 
 
 @dataclass(frozen=True)
-class BifurcationDiagram:
-    """Bands of both branches with the Hopf and fold points.
+class DiagramBands:
+    """The posterior's bifurcation diagram: bands of both branches with the Hopf and fold points.
+
+    (Named apart from :class:`~bayeshopf.simulators.BifurcationDiagram`, a
+    simulated system's continued orbits.)
 
     Attributes:
         stable: The stable branch.

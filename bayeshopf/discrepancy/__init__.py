@@ -17,8 +17,18 @@ tells "the parameters are off" from "a term is missing"
 (:mod:`bayeshopf.discrepancy.calibration`). :func:`analyse` and the command
 use it by default for such systems (``calibrate=False``, ``--no-calibration``:
 every parameter nominal, single terms).
+
+Its modules, in the order the analysis uses them: ``features``,
+``terms``, ``orbits``, ``select`` (single terms, every parameter
+nominal), ``prepare`` (what both analyses start from), ``locate``,
+``stages`` (one model's fit), ``single`` and ``calibrated``
+(the two analyses' reports), ``calibration`` with ``problem``,
+``evidence``, ``fitting``, ``records`` and ``verdict``,
+``render`` (``report.md``), ``analysis`` (the front door),
+``effects`` (planted effects for blind tests).
 """
 
+from bayeshopf._lazy import submodule_getattr
 from bayeshopf.discrepancy.analysis import DiscrepancyReport as DiscrepancyReport
 from bayeshopf.discrepancy.analysis import analyse as analyse
 from bayeshopf.discrepancy.calibration import CalibrationReport as CalibrationReport
@@ -29,3 +39,5 @@ from bayeshopf.discrepancy.effects import with_effect as with_effect
 from bayeshopf.discrepancy.terms import KINDS as KINDS
 from bayeshopf.discrepancy.terms import Term as Term
 from bayeshopf.discrepancy.terms import library as library
+
+__getattr__ = submodule_getattr(__name__)

@@ -21,14 +21,22 @@ r"""Hidden effects planted in a simulated truth (for blind tests of the analysis
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.discrepancy.orbits import solve_orbits, track
 from bayeshopf.discrepancy.terms import KINDS, TermError, library
+from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
+from bayeshopf.simulators.continuation import bifurcation_diagram, continue_from_hopf
+from bayeshopf.simulators.periodic import periodic_orbit
+from bayeshopf.simulators.recordings import _plan, simulate_recordings
 
 __all__ = ["DELAY_TAU", "EFFECTS_OUTSIDE", "effect_names", "effect_units", "with_effect"]
 
@@ -41,8 +49,6 @@ EFFECTS_OUTSIDE = ("delayed_aero",)
 @functools.lru_cache(maxsize=8)
 def _typical(system: System) -> tuple[dict[str, float], float]:
     """Half peak-to-peak per coordinate and frequency over the system's default plan."""
-    from bayeshopf.simulators.continuation import bifurcation_diagram
-
     diagram = bifurcation_diagram(system)
     plan = system.default_plan or ((0.5 * sum(diagram.branch("stable").mu_span), "stable"),)
     amps: dict[str, list[float]] = {c: [] for c in system.observed}
@@ -113,17 +119,17 @@ def with_effect(system: System, name: str, value: float) -> System:
     ensure_x64()
     names = effect_names(system)
     if name not in names:
-        raise TermError(f"--effect: expected one of {', '.join(names) or '(none)'} for "
+        raise TermError(f"effect name: expected one of {', '.join(names) or '(none)'} for "
                         f"{system.name}; got {name!r}")
     value = float(value)
     if not np.isfinite(value):
-        raise TermError(f"--effect-value: a finite number expected; got {value!r}")
+        raise TermError(f"effect value: a finite number expected; got {value!r}")
     if name == "delayed_aero":
         return _delayed_aero(system, value)
     amp, f = _typical(system)
     term = library(system, amp, f)[name]
     if term.positive and value < 0:
-        raise TermError(f"--effect-value: a freeplay gap >= 0 expected; got {value!r}")
+        raise TermError(f"effect value: a freeplay gap >= 0 expected; got {value!r}")
     pos = system.state_names.index(term.coordinate)
     vname = f"{term.coordinate}_dot"
     vel = system.state_names.index(vname) if vname in system.state_names else pos + 1
@@ -151,8 +157,6 @@ class _TrackedDiagram:
     """The few members of a BifurcationDiagram that ``simulate_recordings`` reads."""
 
     def __init__(self, system: System, orbits: dict):
-        from types import SimpleNamespace
-
         self.system = system
         self._orbits = orbits
         self.hopf = SimpleNamespace(mu=float("nan"))
@@ -162,8 +166,6 @@ class _TrackedDiagram:
         return _TrackedBranch(kind)
 
     def orbit_at(self, mu: float, branch: str = "stable", *, n_points: int | None = None):
-        from bayeshopf.simulators.periodic import periodic_orbit
-
         x0, T = self._orbits[(float(mu), branch)]
         return periodic_orbit(self.system, mu, x0, T, n_points=n_points or 256)
 
@@ -181,9 +183,6 @@ def effect_orbits(system: System, name: str, value: float, plan) -> tuple[System
         TermError: If the branch has no LCO at a requested point with the effect.
     """
     ensure_x64()
-    from bayeshopf.discrepancy.orbits import solve_orbits, track
-    from bayeshopf.simulators.continuation import bifurcation_diagram, continue_from_hopf
-
     eff = with_effect(system, name, value)
     if name == "delayed_aero":
         d = continue_from_hopf(eff)
@@ -223,11 +222,6 @@ def simulate_with_effect(system: System, name: str, value: float, mu=None, branc
         (``None`` where they cannot be computed).
     """
     ensure_x64()
-    import dataclasses
-
-    from bayeshopf.data.recording import RecordingSet
-    from bayeshopf.simulators.recordings import _plan, simulate_recordings
-
     plan = _plan(system, mu, branch)
     eff, orbits = effect_orbits(system, name, value, plan)
     rs = simulate_recordings(eff, [m for m, _ in plan], [b for _, b in plan],
@@ -246,9 +240,6 @@ def simulate_with_effect(system: System, name: str, value: float, mu=None, branc
 def truth_points(system: System, name: str, value: float) -> dict:
     """Hopf point and folds (lowest μ first) of ``system`` with the effect (``None``: none)."""
     ensure_x64()
-    from bayeshopf.errors import BayesHopfError
-    from bayeshopf.simulators.continuation import continue_from_hopf
-
     try:
         d = continue_from_hopf(with_effect(system, name, value))
     except BayesHopfError as exc:

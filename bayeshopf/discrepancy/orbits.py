@@ -18,67 +18,33 @@ serves every coefficient value.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
-import diffrax
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import System
-from bayeshopf.simulators.periodic import floquet_stable
+from bayeshopf.simulators.periodic import floquet_stable, kernels, split_shot
 
 __all__ = ["OrbitBatch", "solve_orbits", "track"]
 
 #: Samples per period of the solved orbits (enough for harmonics up to ~20).
 N_SAMPLES = 64
 _RTOL, _ATOL = 1e-9, 1e-12
-
-
-#: Largest number of solver steps per period: an orbit needs about a hundred; a
-#: Newton iterate that blows up stops here instead of costing 65536 steps.
+#: Largest number of solver steps per period, far below the simulators' default:
+#: a Newton iterate that blows up stops here.
 _MAX_STEPS = 4096
 
 
-@functools.lru_cache(maxsize=16)
 def _batched(system: System):
-    """Vectorised shooting (state, monodromy, f at the end) and sampling of one system."""
-    rhs = system.rhs
-    jac_x = jax.jacfwd(rhs, argnums=0)
-    solver = diffrax.Dopri8()
-    ctrl = diffrax.PIDController(rtol=_RTOL, atol=_ATOL)
+    """Vectorised shooting (state, monodromy, f at the end), field and sampling of one system.
 
-    def aug(s, y, args):
-        x, phi = y
-        T, mu, p = args
-        return T * rhs(x, mu, p), T * (jac_x(x, mu, p) @ phi)
-
-    def shoot(x0, T, mu, p):
-        n = x0.shape[0]
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(aug), solver, 0.0, 1.0, None, (x0, jnp.eye(n)), args=(T, mu, p),
-            stepsize_controller=ctrl, saveat=diffrax.SaveAt(t1=True), max_steps=_MAX_STEPS,
-            throw=False)
-        x1, phi = (leaf[-1] for leaf in sol.ys)
-        ok = (sol.result == diffrax.RESULTS.successful).astype(x0.dtype)
-        return jnp.concatenate([x1, phi.ravel(), jnp.zeros(n), rhs(x1, mu, p), ok[None]])
-
-    def field_(s, x, args):
-        T, mu, p = args
-        return T * rhs(x, mu, p)
-
-    def sample(x0, T, mu, p, n):
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(field_), solver, 0.0, 1.0, None, x0, args=(T, mu, p),
-            stepsize_controller=ctrl, saveat=diffrax.SaveAt(ts=jnp.arange(n) / n),
-            max_steps=_MAX_STEPS, throw=False)
-        return sol.ys
-
-    return (jax.jit(jax.vmap(shoot, in_axes=(0, 0, 0, None))),
-            jax.jit(jax.vmap(rhs, in_axes=(0, 0, None))),
-            jax.jit(jax.vmap(sample, in_axes=(0, 0, 0, None, None)), static_argnums=4))
+    The shared kernels of :func:`bayeshopf.simulators.periodic.kernels`, without
+    the μ-sensitivity (Newton here is at fixed μ).
+    """
+    k = kernels(system, _RTOL, _ATOL, max_steps=_MAX_STEPS, mu_sensitivity=False)
+    return k.shoot_batch, k.f_batch, k.sample_batch
 
 
 @dataclass(frozen=True)
@@ -131,10 +97,8 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     mono = np.zeros((R, n, n))
     for _ in range(max_iter):
         out = np.asarray(shoot(jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p))
-        x1 = out[:, :n]
-        phi = out[:, n:n + n * n].reshape(R, n, n)
-        f1 = out[:, 2 * n + n * n:3 * n + n * n]
-        okr = (out[:, -1] > 0.5) & np.all(np.isfinite(out), axis=1)
+        x1, phi, _, f1, okr = split_shot(out, n)
+        okr = okr & np.all(np.isfinite(out), axis=1)
         alive &= okr | done
         mono = np.where(done[:, None, None], mono, phi)
         if done.all():

@@ -21,12 +21,12 @@ are replaced by their deviations from the :math:`1/\sigma^2`-weighted mean over
 recordings; the remaining Gaussian normalisations are the same for every
 model and cancel in the comparison. The **model-error floor** is
 :data:`FLOOR_REL` (0.1%) of the channel's first-harmonic magnitude for every
-coefficient and mean, and :data:`FLOOR_FREQ` (0.01%) of the frequency: on
-noise-free simulated recordings the feature estimator and the shooting
-solver agree to better than :math:`10^{-6}` relative, so the floor does not
-hide numerical error; it stands for what no rig reproduces better than
-0.1% (sensor calibration, small temperature drifts) and keeps a well-measured
-record from declaring a 0.01% discrepancy significant.
+coefficient and mean, and :data:`FLOOR_FREQ` (0.01%) of the frequency. It
+lies far above the disagreement of the feature estimator and the shooting
+solver on noise-free simulated recordings, so it does not hide numerical
+error; it stands for what no rig reproduces better than 0.1% (sensor
+calibration, small temperature drifts) and keeps a well-measured record from
+declaring a 0.01% discrepancy significant.
 
 An orbit that the simulator with the term does not have at a recording's μ
 (its branch's fold moved past μ) contributes a large but finite misfit,
@@ -59,7 +59,12 @@ from bayeshopf.discrepancy.orbits import OrbitBatch, track
 from bayeshopf.discrepancy.terms import Library, Term, library_params
 from bayeshopf.simulators.base import System
 
-__all__ = ["FLOOR_FREQ", "FLOOR_REL", "Fitter", "TermFit"]
+__all__ = ["ALPHA", "FLOOR_FREQ", "FLOOR_REL", "TIE_FACTOR", "Fitter", "TermFit"]
+
+#: Significance level of a misfit (:math:`\chi^2` survival probability below it).
+ALPHA = 1e-3
+#: Two models are named together when their probabilities are within this factor.
+TIE_FACTOR = 5.0
 
 FLOOR_REL = 1e-3
 FLOOR_FREQ = 1e-4

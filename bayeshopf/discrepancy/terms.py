@@ -59,6 +59,7 @@ import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -225,8 +226,6 @@ def _linear_stiffness(system: System, coord: str) -> float:
     acceleration per unit force, at the middle of ``system.mu_range``. Used for
     the prior scales when the system has no ``k_<coordinate>`` parameter.
     """
-    import jax
-
     pos = system.state_names.index(coord)
     vel = (system.state_names.index(f"{coord}_dot") if f"{coord}_dot" in system.state_names
            else pos + 1)

@@ -19,8 +19,14 @@ map's linear coefficients.
 
 Each datum is the mean over segments; its measurement error is the standard
 error of that mean (the spread over segments divided by √n), and never less
-than the least-squares standard error of the whole record, which is also the
-error of a record too short to cut (a single segment).
+than the least-squares standard error of the whole record. A record of fewer
+than :data:`MIN_SEGMENTS_FOR_SPREAD` segments has no usable spread: its error
+is taken from the residual's spectrum beside each harmonic
+(:func:`spectral_se`), which counts coloured noise where it moves the
+coefficients, with the Student-t's variance of a scale estimated from a few
+periodogram bins; a record too short for bins of its own (a few periods)
+takes the spectrum of all such records pooled, and the white-noise
+least-squares error where even those are too few.
 
 **Control** (control-based continuation). When the recordings name a control
 channel (the actuator command, :class:`~bayeshopf.data.RecordingSet`'s
@@ -56,6 +62,8 @@ DEFAULT_HARMONICS = 4
 DEFAULT_SEGMENT_PERIODS = 5.0
 #: Fewest segments from which a spread (and so a standard error) is taken.
 MIN_SEGMENTS_FOR_SPREAD = 4
+#: Fewest periodogram bins beside each harmonic from which its noise level is taken.
+MIN_SPECTRAL_BINS = 4
 
 
 def n_coefficients(n_harmonics: int) -> int:
@@ -164,6 +172,98 @@ def _frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
     return 2 * np.pi * float(res.x)
 
 
+def noise_bins(resid: np.ndarray, idx: np.ndarray, dt: float, omega: float,
+               n_harmonics: int) -> list[np.ndarray]:
+    """The residual's periodogram beside each harmonic (the bins :func:`spectral_se` averages).
+
+    Args:
+        resid: Residuals of the whole record's fit, ``(n_t, n_ch)``.
+        idx: Each sample's index on the uniform grid (gaps skipped).
+        dt: The grid's spacing (s).
+        omega: The fundamental angular frequency (rad/s).
+        n_harmonics: K.
+
+    Returns:
+        For ``k = 0..K``, the one-sided spectral density (units²/Hz) in the
+        bins within half a harmonic spacing of ``kω/2π`` and outside the Hann
+        window's main lobe about it, ``(n_bins_k, n_ch)``.
+    """
+    from scipy.signal import periodogram
+
+    n_grid = int(idx[-1]) + 1
+    grid = np.zeros((n_grid, resid.shape[1]))
+    grid[idx] = resid
+    f, p = periodogram(grid, fs=1.0 / dt, window="hann", detrend=False, axis=0)
+    p = p * (n_grid / idx.size)          # zeros in the gaps carry no power
+    f0 = omega / (2 * np.pi)
+    lobe = 2.0 / (n_grid * dt)           # the Hann window's main lobe, half width
+    out = []
+    for k in range(n_harmonics + 1):
+        d = np.abs(f - k * f0)
+        out.append(p[(d <= 0.5 * f0) & (d >= lobe) & (f > 0)])
+    return out
+
+
+def spectral_se(bins: list[np.ndarray], duration: float) -> np.ndarray | None:
+    r"""Standard errors of the coefficients from the noise's spectrum beside each harmonic.
+
+    Least squares over a record of duration ``T`` estimates a harmonic's
+    coefficients with variance ``S(f_k)/T`` (``a_k``, ``b_k``) and ``S(0)/(2T)``
+    (``a_0``) when the noise is stationary with one-sided spectral density
+    ``S`` near the harmonic's frequency ``f_k = kω/2π`` (Brockwell & Davis,
+    *Time Series: Theory and Methods*, §10.3); white noise of variance σ² gives
+    the familiar ``2σ²/N``. ``S(f_k)`` is the mean of the residual's Hann
+    periodogram over the bins beside ``f_k`` (:func:`noise_bins`). Coloured
+    noise, such as a sensor's low-frequency wander or turbulence, is thereby
+    counted at the frequencies where it moves the coefficients, which the
+    white-noise error of the least squares misses and a spread over two or
+    three segments estimates with one or two degrees of freedom. A level
+    averaged over ``n`` bins is itself an estimate with about ``n`` degrees of
+    freedom: the variance is multiplied by ``n/(n − 2)``, the variance of the
+    Student-t that the estimated scale implies, so that a short record's error
+    enters the Gaussian likelihood with the right second moment.
+
+    Args:
+        bins: :func:`noise_bins`' bins for ``k = 0..K`` (a record's own, or
+            several records' pooled).
+        duration: The record's duration with samples (s).
+
+    Returns:
+        ``(n_ch, 2K+1)`` standard errors, or ``None`` when some harmonic has
+        fewer than :data:`MIN_SPECTRAL_BINS` bins.
+    """
+    level = []
+    for b in bins:
+        n = b.shape[0]
+        if n < MIN_SPECTRAL_BINS:
+            return None
+        level.append(b.mean(axis=0) * n / (n - 2))
+    level = np.array(level).T            # (n_ch, K+1)
+    var = np.concatenate([level[:, :1] / 2, level[:, 1:], level[:, 1:]], axis=1) / duration
+    return np.sqrt(var)
+
+
+def _short_record_se(short: list[dict], n_harmonics: int) -> None:
+    """Fill ``se`` of the records with too few segments for a spread (in place).
+
+    Each takes its own spectrum beside the harmonics (:func:`spectral_se`);
+    one whose own has too few bins (a record of a few periods) takes the bins
+    of every such record pooled (the same sensors; the frame is common), and
+    without enough of those the white-noise least-squares error. The crest's
+    sine of the first channel is zero by the alignment, whatever the noise,
+    and keeps the least-squares error.
+    """
+    pooled = [np.concatenate([r["bins"][k] for r in short]) for k in range(n_harmonics + 1)]
+    for r in short:
+        se = spectral_se(r["bins"], r["duration"])
+        if se is None:
+            se = spectral_se(pooled, r["duration"])
+        if se is None:
+            se = r["se_ls"].copy()
+        se[0, n_harmonics + 1] = r["se_ls"][0, n_harmonics + 1]
+        r["se"][...] = se
+
+
 @dataclass(frozen=True)
 class HarmonicFeatures:
     """Phase-aligned time-Fourier coefficients of every recording (immutable).
@@ -265,6 +365,7 @@ def extract_harmonics(
     n_c = n_coefficients(n_harmonics)
     out = {k: [] for k in ("c", "se", "rms", "nseg", "om", "om_se", "amp", "amp_sd", "u")}
     phi = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+    short = []      # records too short for a spread over segments
     for rec, z in zip(rs, orbits, strict=True):
         w = frame.to_frame(z)
         t = rec.t - rec.t[0]
@@ -311,13 +412,15 @@ def extract_harmonics(
         # (the same numbers as lstsq to 1e-16 on the rig; the 7 records take 0.75 s, not 0.84)
         G_inv = np.linalg.inv(A.T @ A)
         whole = G_inv @ (A.T @ w)
+        resid = w - A @ whole
         dof = max(t.size - n_c, 1)
-        s2 = np.sum((w - A @ whole) ** 2, axis=0) / dof
-        se_ls = np.sqrt(np.outer(s2, np.diag(G_inv)))
+        se_ls = np.sqrt(np.outer(np.sum(resid**2, axis=0) / dof, np.diag(G_inv)))
         if n_seg >= MIN_SEGMENTS_FOR_SPREAD:
             se = np.maximum(seg.std(axis=0, ddof=1) / np.sqrt(n_seg), se_ls)
-        else:
-            se = se_ls
+        else:       # too few segments for a spread: the noise beside each harmonic
+            se = np.empty_like(se_ls)
+            short.append({"se": se, "se_ls": se_ls, "duration": idx.size * dt,
+                          "bins": noise_bins(resid, idx, dt, omega, n_harmonics)})
         orbit_mean = reconstruct(mean, phi)
         dev = reconstruct(seg, phi) - orbit_mean
         out["c"].append(mean)
@@ -328,6 +431,8 @@ def extract_harmonics(
         out["om_se"].append(float(np.std(seg_om, ddof=1) / np.sqrt(n_seg)) if n_seg > 1 else 0.0)
         out["amp"].append(float(_amplitude(mean, frame)))
         out["amp_sd"].append(float(_amplitude(seg, frame).std(ddof=1)) if n_seg > 1 else 0.0)
+    if short:
+        _short_record_se(short, n_harmonics)
     return HarmonicFeatures(
         mu=rs.mus, unstable=rs.is_unstable, coeffs=np.array(out["c"]),
         coeffs_se=np.array(out["se"]), segment_rms=np.array(out["rms"]),

@@ -11,9 +11,15 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from bayeshopf._atomic import replacing
+from bayeshopf._xla import (  # noqa: F401 (re-exported)
+    BLAS_THREADS,
+    CLASSIC_FUSION,
+    HOST_DEVICES,
+    SINGLE_THREAD_EIGEN,
+    configure_xla_cpu,
+)
 
 _ENABLED: list[str] = []
 
@@ -54,101 +60,37 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
     return target
 
 
-#: XLA flag that keeps the CPU backend's Eigen work on one thread per computation.
-SINGLE_THREAD_EIGEN = "--xla_cpu_multi_thread_eigen=false"
-#: XLA flag that compiles CPU fusions with the classic emitters (jaxlib ≥ 0.10).
-CLASSIC_FUSION = "--xla_cpu_use_fusion_emitters=false"
-#: XLA flag that makes the CPU appear as several devices.
-HOST_DEVICES = "--xla_force_host_platform_device_count"
-#: Threads of OpenBLAS, in whose scipy build XLA's CPU LAPACK kernels run.
-BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")
+#: Functions that forget a layer's in-memory compiled programs (:func:`on_release`).
+_RELEASERS: list[Callable[[], None]] = []
 
 
-def _jaxlib_version() -> tuple[int, ...]:
-    from importlib.metadata import PackageNotFoundError, version
+def on_release(forget: Callable[[], None]) -> Callable[[], None]:
+    """Register ``forget`` to run at each :func:`release_compiled` (usable as a decorator).
 
-    try:
-        return tuple(int(p) for p in version("jaxlib").split(".")[:2])
-    except (PackageNotFoundError, ValueError):
-        return (0,)
-
-
-def configure_xla_cpu(host_devices: int = 1) -> list[str]:
-    """Add the CPU flags below to ``XLA_FLAGS``, each unless the user set it.
-
-    - :data:`SINGLE_THREAD_EIGEN`. With XLA's multithreaded Eigen pool, jaxlib
-      0.10 on CPU now and then stalls compiling the NUTS programs, every thread
-      idle in ``CompileAndLoad`` (PyAutoFit's issue #1528 describes the same stall
-      and the same cure). The models here are small, so one thread per
-      computation costs nothing measurable.
-    - :data:`CLASSIC_FUSION` (jaxlib ≥ 0.10 only: older XLA aborts on flags it
-      does not know). The fusion emitters cost compile time, not run time
-      (``benchmarks/cli_speed_fusion_emitters.json`` against ``cli_speed.json``).
-
-    - With ``host_devices > 1``, :data:`HOST_DEVICES` ``=host_devices``: the CPU
-      appears as that many devices, and NUTS splits its chains between them
-      (:func:`~bayeshopf.inference.collapsed.spread_devices`). The CLI asks for
-      one per core it may use, up to four (the chains). With one thread per
-      computation (above), one device computes on one core at a time.
-
-    It also gives OpenBLAS one thread unless the user set ``OPENBLAS_NUM_THREADS``:
-    it sets that variable to 1 (:data:`BLAS_THREADS`), which an OpenBLAS reads
-    when it loads, and limits those already loaded to one thread with
-    ``threadpoolctl``. There are two: NumPy's, loaded with NumPy (and so before
-    any caller can run this), which computes the features' least squares and the
-    bands' products, and SciPy's, loaded with its linear algebra, whose
-    Cholesky factorisations and triangular solves jaxlib calls on CPU. Their
-    worker threads busy-wait between calls, and the matrices here are far too
-    small to gain from them: SciPy's slows the NUTS stage with two devices, and
-    NumPy's takes the second core from the figure process while the CLI computes
-    features (measurements in ``docs/changelog.md``).
-
-    The XLA flags take effect only before JAX's first computation in the process
-    (the CLI and the test suite call this first).
-
-    Args:
-        host_devices: CPU devices wanted (1: JAX's default, no flag added).
-
-    Returns:
-        The flags of this function now in ``XLA_FLAGS``.
+    The layers that keep compiled programs of their own (the model's per-spec
+    jits, the inference's model functions) register here, so that this module
+    needs none of them.
     """
-    if BLAS_THREADS[0] not in os.environ:
-        os.environ[BLAS_THREADS[0]] = BLAS_THREADS[1]      # those that load from now on
-        threadpool_limits(int(BLAS_THREADS[1]), user_api="blas")   # those loaded already
-    flags = os.environ.get("XLA_FLAGS", "")
-    wanted = [SINGLE_THREAD_EIGEN]
-    if _jaxlib_version() >= (0, 10):
-        wanted.append(CLASSIC_FUSION)
-    if host_devices > 1:
-        wanted.append(f"{HOST_DEVICES}={int(host_devices)}")
-    for flag in wanted:
-        if flag.split("=")[0] not in flags:
-            flags = f"{flags} {flag}".strip()
-    os.environ["XLA_FLAGS"] = flags
-    return [f for f in wanted if f in flags]
+    if forget not in _RELEASERS:
+        _RELEASERS.append(forget)
+    return forget
 
 
 def release_compiled() -> None:
-    """Drop every in-memory compiled program (bayeshopf's per-spec jits and JAX's caches).
+    """Drop every in-memory compiled program (bayeshopf's registered ones and JAX's caches).
 
     Each fit compiles its own closures (the potential, the SVI step, the
     predictions of its :class:`~bayeshopf.model.collapsed.CollapsedSpec`), and JAX
     keeps the compiled code mapped in memory. A process that fits many data
-    sets (leave-one-out, calibration over seeds) then exhausts the kernel's
-    limit on memory mappings (``vm.max_map_count``, 65530 by default): LLVM
-    fails with "Cannot allocate memory" (the 3-DOF calibration crashed at its
-    14th fit of 4 starts, with 23 GB of memory free).
-    The collapsed core leaks the same way (its short-record calibration
-    crashed at its 16th fit, after about 4,400 new mappings per fit).
-    :func:`~bayeshopf.posterior.fit_hybrid` calls this first; nothing compiled
-    for an earlier fit is reused by a later one, and the persistent cache on
-    disk is kept, so a repeated fit still loads its programs instead of compiling.
+    sets (leave-one-out, calibration over seeds) would otherwise exhaust the
+    kernel's limit on memory mappings (``vm.max_map_count``), and LLVM fails
+    with "Cannot allocate memory". :func:`~bayeshopf.posterior.fit_hybrid`
+    calls this first; nothing compiled for an earlier fit is reused by a later
+    one, and the persistent cache on disk is kept, so a repeated fit still
+    loads its programs instead of compiling.
     """
-    from bayeshopf.inference.collapsed import clear_model_functions
-    from bayeshopf.model import collapsed
-
-    collapsed.clear_jits()
-    clear_model_functions()
+    for forget in _RELEASERS:
+        forget()
     _COMPILED.clear()
     jax.clear_caches()
 
@@ -209,9 +151,8 @@ def compiled_call(name: str, make: Callable[[], Callable], args: tuple, key) -> 
 
     JAX's persistent cache skips XLA's compilation of a program it has seen,
     but not the tracing of the Python function and its lowering to StableHLO:
-    for the MAP and NUTS programs of the rig that was about 4.5 s of every
-    warm fit (trace 2.7 s, lowering 1.8 s; ``jax.monitoring`` durations, in a
-    probe). The first call with a given ``key`` exports the jitted function
+    for the MAP and NUTS programs that is most of a warm fit's time. The first
+    call with a given ``key`` exports the jitted function
     (:func:`jax.export.export`) and stores its serialization in the
     compilation cache folder; later calls deserialize it and run it, so
     ``make`` is not even called and only the (cached) compilation remains.
@@ -292,8 +233,8 @@ def stored_shapes(name: str, key, compute: Callable[[], dict]) -> dict:
 
     :func:`compile_ahead` needs the shapes of a program's arguments before the
     program exists, and finding them traces the model (NumPyro's
-    ``initialize_model``, NUTS's ``init``): about 2 s of a warm rig fit, which
-    otherwise loads every program without tracing anything. ``compute``'s
+    ``initialize_model``, NUTS's ``init``): a noticeable part of a warm fit,
+    which otherwise loads every program without tracing anything. ``compute``'s
     result is stored in the compilation cache folder under a SHA-256 of
     ``name``, ``key`` and the sources (as :func:`compiled_call`'s programs are)
     and read back by the next process.

@@ -39,7 +39,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import FitError
 from bayeshopf.model import collapsed as cm
-from bayeshopf.posterior import branch_sign
+from bayeshopf.model.normal_form import branch_sign
 
 #: Phases on which the predicted orbit is searched for the nearest point.
 N_PHASE_GRID = 720

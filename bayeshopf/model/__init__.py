@@ -1,1 +1,14 @@
-"""The model: normal form, coordinate map U12, their composition, and the NumPyro model."""
+"""The model: the normal form, the collapsed hybrid model and its pieces.
+
+:mod:`~bayeshopf.model.normal_form` (the mechanistic part),
+:mod:`~bayeshopf.model.spec` (the model's structure and the LCO radius),
+:mod:`~bayeshopf.model.marginal` (the collapsed Gaussian),
+:mod:`~bayeshopf.model.frequency` (the phase speed),
+:mod:`~bayeshopf.model.discrepancy` (the model discrepancy) and
+:mod:`~bayeshopf.model.collapsed` (the NumPyro model, which re-exports the others' names).
+"""
+
+
+from bayeshopf._lazy import submodule_getattr
+
+__getattr__ = submodule_getattr(__name__)

@@ -31,7 +31,7 @@ group (module constants below): ``ρ`` (the orbit scale in the frame) times
 ``τ_μ^p`` for a term of power ``p`` in μ̃ and ``τ_s`` for the shape terms
 (network and polynomial). ``τ_μ`` and ``τ_s`` are hyperparameters with
 log-normal priors, integrated over with the rest: how much the map may change
-with μ trades against μ0 (``docs`` of the collapsed-map probe), and the
+with μ trades against μ0, and the
 posterior must carry that. The hidden layer ``(W_1, b_1)`` is a fixed draw from
 its unit-normal prior (random features), so the network's prior is kept and its
 output layer integrated exactly.
@@ -42,32 +42,15 @@ model-error scale per channel and ``σ_rel ~ HalfNormal(0.02)`` a model error in
 proportion to each coefficient (no free per-harmonic scatter that could take up
 the centre shift).
 
-**Collapsing.** With ``V = diag(v)``, ``D = diag(se^2 + σ^2)`` and
-``Φ' = Φ V^{1/2}``,
+**Collapsing.** Given the few nonlinear parameters ``θ`` (the normal form's
+gaps, ``τ_μ``, ``τ_s``, ``σ``), ``y_c`` is Gaussian with ``β_c`` integrated out,
+``y_c | θ ~ N(0, Φ V Φᵀ + D)`` (:mod:`bayeshopf.model.marginal`, Woodbury form,
+``V = diag(v)``, ``D = diag(se² + σ² + …)``), and ``β_c | y, θ`` is Gaussian.
+The posterior of ``θ`` is sampled; ``β`` is drawn exactly given each draw of ``θ``.
 
-.. math::
-
-    \log p(y_c\mid θ) = -\tfrac12\Big[y^T D^{-1} y - b^T A^{-1} b
-        + \log|D| + \log|A| + n\log 2π\Big],\quad
-    A = I + Φ'^T D^{-1} Φ',\ b = Φ'^T D^{-1} y,
-
-and ``β_c | y, θ ~ N(V^{1/2} A^{-1} b, V^{1/2} A^{-1} V^{1/2})``. The
-posterior of the few nonlinear parameters ``θ`` (the normal form's gaps, ``τ_μ``,
-``τ_s``, ``σ``) is sampled; ``β`` is drawn exactly given each draw of ``θ``.
-
-**Frequency** (the phase equation ``θ̇ = Ω``). By the rotational symmetry of the
-normal form the phase speed depends on ``r`` and ``μ`` only, so each recording's
-frequency is one number, ``ω_i = Ω(r_i, μ_i)``. ``Ω`` is a polynomial in
-``r̃² = (r/r_ref)²`` and ``μ̃`` (:data:`FREQUENCY_TERMS`) about the mean measured
-frequency ``ω̄``,
-
-.. math::  ω_i = ω̄ + χ(r̃_i^2, μ̃_i)^T γ + ε_i,\qquad
-           γ_j \sim N(0, (s_ω ω̄)^2),\quad ε_i \sim N(0, se_{ω,i}^2 + σ_ω^2),
-
-with ``σ_ω ~ HalfNormal(0.01 ω̄)``: linear in ``γ``, so ``γ`` is integrated out by
-the same Woodbury marginal and drawn exactly per draw, and only ``σ_ω`` joins
-the sampled parameters. The record is then the map applied to the circle
-traversed at ``Ω(r_i, μ_i)``: no phase integration is needed.
+**Frequency** (the phase equation ``θ̇ = Ω``, :mod:`bayeshopf.model.frequency`):
+``ω_i = Ω(r_i, μ_i)``, a polynomial in ``r̃²`` and ``μ̃`` linear in its
+coefficients ``γ``, integrated out by the same marginal.
 
 **Control** (recordings held by control-based continuation, when the rig
 records the controller's output). CBC holds an orbit with a feedback force
@@ -123,17 +106,42 @@ without the discrepancy, kept while the discrepancy is not the default).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
-from bayeshopf.features.frame import PlanarFrame
 from bayeshopf.model import discrepancy as dm
-from bayeshopf.model import normal_form
+from bayeshopf.model.frequency import (  # noqa: F401 (re-exported)
+    FREQUENCY_SCALE,
+    FREQUENCY_TERMS,
+    SIGMA_OMEGA_PRIOR,
+    draw_frequency,
+    frequency,
+    frequency_basis,
+    frequency_design,
+    frequency_marginal,
+    frequency_prior_sd,
+    radius_tilde_squared,
+)
+from bayeshopf.model.marginal import (  # noqa: F401 (re-exported)
+    _factored,
+    _log_marginal_jvp,
+    block_log_predictive,
+    conditional_draw,
+    log_marginal,
+)
+from bayeshopf.model.spec import (  # noqa: F401 (re-exported)
+    CONTROL_TERMS,
+    MONOMIALS,
+    MU_POWERS,
+    CollapsedSpec,
+    hidden_layer,
+    radius,
+    reference_radius,
+    unfolding,
+)
 
 #: Prior scale of the linear gains ``T_L[:, :2]`` relative to ρ (broad).
 LINEAR_SCALE = 2.0
@@ -147,14 +155,6 @@ TAU_SHAPE_PRIOR = (0.1, 1.0)
 SIGMA_PRIOR = 0.02
 #: Half-normal scale of the relative model error σ_rel (a fraction of each coefficient).
 SIGMA_REL_PRIOR = 0.02
-#: Prior sd of each frequency coefficient ``γ_j`` as a fraction of ``ω̄`` (broad: a
-#: 10% change of the frequency per unit of ``r̃²`` or of ``μ̃``).
-FREQUENCY_SCALE = 0.1
-#: Half-normal scale of the frequency's model error ``σ_ω`` as a fraction of ``ω̄``.
-SIGMA_OMEGA_PRIOR = 0.01
-#: Terms ``(r̃²)^i μ̃^j`` of the phase speed ``Ω(r, μ) − ω̄``, as ``(i, j)``: the
-#: normal form's ``ω_0 + ω_1 (μ − μ_0) + b_1 r² + b_2 r⁴`` (a constant, μ̃, r̃², r̃⁴).
-FREQUENCY_TERMS = ((0, 0), (0, 1), (1, 0), (2, 0))
 #: Half-normal scale of the extra model error away from the recordings, ``s_e`` (log
 #: orbit size), of a fit without the model discrepancy whose relative model error σ_rel
 #: passes its check (:data:`SIGMA_REL_LIMIT`; module docstring).
@@ -177,111 +177,9 @@ GAP_PRIOR = 1.0
 N_PHI = 32
 
 
-@dataclass(frozen=True)
-class CollapsedSpec:
-    """Static structure and data constants of the collapsed model (immutable).
-
-    Attributes:
-        criticality: ``"subcritical"`` or ``"supercritical"``.
-        frame: The common planar frame of the features.
-        n_harmonics: K.
-        mu_centre: μ_c (centre of the training μ).
-        mu_span: Δμ (range of the training μ); also the prior scale of the gaps.
-        mu_min: Smallest training μ.
-        mu_unstable_max: Largest unstable training μ, or ``None``.
-        orbit_scale: ρ, the median amplitude of the orbits' fundamentals (frame units).
-        nn_hidden: Hidden weights ``W_1`` (3 × H) and biases ``b_1`` (H,) of the
-            network (a fixed draw from their unit-normal prior).
-        mu_label: Name of μ.
-        mu_units: Unit of μ.
-        unfolding: ``"linear"`` (the paper's ``μ − μ0``) or ``"curved"``
-            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior).
-        omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
-            ``None`` for a model without the frequency.
-        control_scale: Prior sd of the control's gain ``h`` (frame units per
-            unit of the control channel), or ``None`` for a model without the
-            control term (module docstring, "Control").
-        discrepancy_scale: ``q_{c,h}`` ``(2, 2K+1)`` of the model discrepancy
-            (:mod:`bayeshopf.model.discrepancy`), or ``None`` for a model
-            without it (then the relative model error is ``σ_rel y``, the
-            model of fits saved before the discrepancy existed).
-        discrepancy_floor: ``κ`` of :func:`~bayeshopf.model.discrepancy.scales`
-            (0: purely relative to the model's orbit).
-    """
-
-    criticality: str
-    frame: PlanarFrame
-    n_harmonics: int
-    mu_centre: float
-    mu_span: float
-    mu_min: float
-    mu_unstable_max: float | None
-    orbit_scale: float
-    nn_hidden: tuple
-    mu_label: str = "mu"
-    mu_units: str = ""
-    unfolding: str = "curved"
-    omega_centre: float | None = None
-    control_scale: float | None = None
-    discrepancy_scale: tuple | None = None
-    discrepancy_floor: float = 0.0
-
-    @property
-    def has_discrepancy(self) -> bool:
-        """Whether the model includes the discrepancy Gaussian process."""
-        return self.discrepancy_scale is not None
-
-    def mu_tilde(self, mu):
-        """``μ̃ = (μ − μ_c)/Δμ``."""
-        return (mu - self.mu_centre) / self.mu_span
-
-    @property
-    def n_basis(self) -> int:
-        """Number of columns J of ``Φ``: the map's basis functions, then the control's two."""
-        return self.n_map + (0 if self.control_scale is None else len(CONTROL_TERMS))
-
-    @property
-    def n_map(self) -> int:
-        """Number of the map's own basis functions (monomials and network)."""
-        return len(MONOMIALS) * len(MU_POWERS) + self.nn_hidden[0].shape[1]
-
-    def to_dict(self) -> dict:
-        """JSON-serialisable form."""
-        d = {k: getattr(self, k) for k in self.__dataclass_fields__
-             if k not in ("frame", "nn_hidden")}
-        d["frame"] = self.frame.to_dict()
-        d["nn_hidden"] = [np.asarray(a).tolist() for a in self.nn_hidden]
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> CollapsedSpec:
-        """Inverse of :meth:`to_dict`."""
-        d = dict(d)
-        d["frame"] = PlanarFrame.from_dict(d["frame"])
-        d["nn_hidden"] = tuple(np.asarray(a) for a in d["nn_hidden"])
-        if d.get("discrepancy_scale") is not None:
-            d["discrepancy_scale"] = tuple(tuple(float(v) for v in row)
-                                           for row in d["discrepancy_scale"])
-        return cls(**d)
-
-
-def hidden_layer(width: int, seed: int = 0) -> tuple:
-    """A fixed draw ``(W_1, b_1) ~ N(0, 1)`` of the network's hidden layer (3 inputs)."""
-    rng = np.random.default_rng(seed)
-    return rng.standard_normal((3, width)), rng.standard_normal(width)
-
-
-#: Monomials ``ũ1^i ũ2^j`` of the map, by degree ``i + j`` (0: T_s; 1: T_L's gains;
-#: 2 and 3: the polynomial shape terms), each also multiplied by μ̃ and μ̃².
-MONOMIALS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3))
-#: Powers of μ̃ that multiply each monomial (T_L's μ column, L_1, L_2, …).
-MU_POWERS = (0, 1, 2)
 #: Prior scale, relative to ρ, of a monomial's coefficient by degree, before the
 #: factors τ_μ^p (power p of μ̃) and τ_s (degree ≥ 2).
 DEGREE_SCALE = {0: SHIFT_SCALE, 1: LINEAR_SCALE, 2: 1.0, 3: 1.0}
-#: Names of the control's columns: the real and imaginary parts of ``H``.
-CONTROL_TERMS = ("control_re", "control_im")
-
 
 def basis_names(spec: CollapsedSpec) -> list[str]:
     """Readable names of the J basis functions (``"u1^2 m"``, ``"nn3"``, …)."""
@@ -329,44 +227,12 @@ def prior_sd(spec: CollapsedSpec, tau_mu, tau_shape):
     return jnp.concatenate(parts, axis=-1)
 
 
-def reference_radius(spec: CollapsedSpec, a2):
-    """``r_ref``: ``√a2`` (subcritical: the stable radius at μ0), ``√Δμ`` (supercritical)."""
-    if spec.criticality == "subcritical":
-        return jnp.sqrt(a2)
-    return jnp.sqrt(spec.mu_span) * jnp.ones_like(a2)
-
-
 def projection(n_harmonics: int, n_phi: int = N_PHI) -> np.ndarray:
     """``P``: values at ``n_phi`` uniform phases → ``[a_0, a_1..a_K, b_1..b_K]``, (2K+1, N)."""
     phi = 2 * np.pi * np.arange(n_phi) / n_phi
     k = np.arange(1, n_harmonics + 1)[:, None]
     return np.concatenate([np.full((1, n_phi), 1.0 / n_phi), 2.0 / n_phi * np.cos(k * phi),
                            2.0 / n_phi * np.sin(k * phi)], axis=0)
-
-
-def unfolding(mu, mu0, w, mu_fold):
-    r"""The unfolding ``β(μ)`` that replaces ``μ − μ0`` in ``ṙ = β r + a2 r³ − r⁵``.
-
-    .. math::  β(μ) = \frac{e^{b(μ-μ0)} - 1}{b},\qquad b = \frac{w}{μ0 - μ_{SN}},
-
-    monotone for every ``w`` (its slope ``e^{b(μ−μ0)}`` is positive), with
-    ``β(μ0) = 0`` and ``β'(μ0) = 1``, so μ0 stays the Hopf point; ``w = 0`` is the
-    paper's ``μ − μ0``. ``w`` is the log of the ratio of the unfolding's slopes at
-    μ0 and at the fold.
-    """
-    x = mu - mu0
-    bx = w * x / (mu0 - mu_fold)
-    safe = jnp.where(jnp.abs(bx) < 1e-8, 1.0, bx)
-    return jnp.where(jnp.abs(bx) < 1e-8, x * (1 + 0.5 * bx), x * jnp.expm1(safe) / safe)
-
-
-def radius(spec: CollapsedSpec, mu, sign, theta: dict):
-    """Normal-form LCO radius at μ (``nan`` where the branch does not exist)."""
-    a2, a4 = theta.get("a2", -1.0), theta.get("a4", -1.0)
-    if "w_unfold" in theta:
-        beta = unfolding(mu, theta["mu0"], theta["w_unfold"], theta["mu_fold"])
-        return normal_form.lco_radius(beta, 0.0, a2, sign, a4)
-    return normal_form.lco_radius(mu, theta["mu0"], a2, sign, a4)
 
 
 def _monomial_harmonics(n_harmonics: int, n_phi: int) -> np.ndarray:
@@ -424,142 +290,6 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, contr
         cols.append(control_columns(spec, jnp.zeros((s.shape[0], 2)) if control is None
                                     else control))
     return jnp.concatenate(cols, axis=-1)
-
-
-def frequency_basis(r2, mu_tilde):
-    """``χ(r̃², μ̃)``: the terms :data:`FREQUENCY_TERMS`, shape ``broadcast + (4,)``."""
-    r2, m = jnp.broadcast_arrays(r2, mu_tilde)
-    return jnp.stack([r2**i * m**j for i, j in FREQUENCY_TERMS], axis=-1)
-
-
-def radius_tilde_squared(spec: CollapsedSpec, mu, sign, theta: dict):
-    """``r̃² = (r / r_ref)²`` of the LCO at μ (``nan`` where the branch does not exist)."""
-    return (radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))) ** 2
-
-
-def frequency_design(spec: CollapsedSpec, mu, sign, theta: dict):
-    """``X_i = χ(r̃_i², μ̃_i)`` for every recording, shape ``(n_rec, 4)``."""
-    return frequency_basis(radius_tilde_squared(spec, mu, sign, theta), spec.mu_tilde(mu))
-
-
-def frequency_prior_sd(spec: CollapsedSpec):
-    """Prior sds of ``γ``: :data:`FREQUENCY_SCALE` ``· ω̄`` each."""
-    return jnp.full(len(FREQUENCY_TERMS), FREQUENCY_SCALE * spec.omega_centre)
-
-
-def frequency(spec: CollapsedSpec, theta: dict, gamma, mu, sign):
-    """``Ω(r(μ), μ) = ω̄ + χ(r̃², μ̃)ᵀγ`` (rad/s), broadcast over μ; ``nan`` where no LCO."""
-    r2 = radius_tilde_squared(spec, mu, sign, theta)
-    return spec.omega_centre + jnp.sum(frequency_basis(r2, spec.mu_tilde(mu)) * gamma, axis=-1)
-
-
-def _factored(Phi, y, d, sd):
-    """The collapsed Gaussian's log density and the pieces of its Woodbury form.
-
-    Returns:
-        ``(log N(y | 0, Σ), L, z, D⁻¹Φ', D⁻¹)`` with ``Φ' = Φ V^{1/2}``, ``A = I + Φ'ᵀD⁻¹Φ'
-        = L Lᵀ`` and ``z = L⁻¹b``, ``b = Φ'ᵀD⁻¹y`` (module docstring).
-    """
-    Ps = Phi * sd                                   # Φ'
-    Dinv = 1.0 / d
-    PD = Dinv[:, None] * Ps                         # D⁻¹Φ'
-    L = jnp.linalg.cholesky(jnp.eye(Phi.shape[-1]) + Ps.T @ PD)
-    z = jax.scipy.linalg.solve_triangular(L, PD.T @ y, lower=True)
-    value = -0.5 * (jnp.sum(Dinv * y * y) - z @ z + jnp.sum(jnp.log(d))
-                    + 2.0 * jnp.sum(jnp.log(jnp.diag(L))) + y.size * jnp.log(2 * jnp.pi))
-    return value, L, z, PD, Dinv
-
-
-@jax.custom_jvp
-def log_marginal(Phi, y, d, sd):
-    r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)`` (Woodbury).
-
-    Its derivatives are written out (:func:`_log_marginal_jvp`) rather than
-    traced through the Cholesky factorisation: with ``Φ' = Φ V^{1/2}``,
-    ``A = I + Φ'ᵀD⁻¹Φ'``, ``m = A⁻¹Φ'ᵀD⁻¹y`` and ``α = Σ⁻¹y = D⁻¹(y − Φ'm)``,
-
-    .. math::
-
-        \frac{∂ℓ}{∂Φ} = (α m^T − D^{-1}Φ'A^{-1})\,V^{1/2},\qquad
-        \frac{∂ℓ}{∂d_i} = \tfrac12\big(α_i^2 − (Σ^{-1})_{ii}\big),
-
-        \frac{∂ℓ}{∂\,sd_j} = \frac{m_j^2 − 1 + (A^{-1})_{jj}}{sd_j},\qquad
-        \frac{∂ℓ}{∂y} = −α,
-
-    from ``∂ℓ/∂Σ = ½(ααᵀ − Σ⁻¹)`` with ``Σ⁻¹Φ' = D⁻¹Φ'A⁻¹`` and ``Φ'ᵀα = m``. One
-    Cholesky factor of the J × J matrix ``A`` and triangular solves with it give
-    them all (never ``A⁻¹`` itself, which small measurement errors make
-    ill-conditioned). The rig's NUTS stage took 8.3–9.6 s with it against
-    9.6–10.7 s through reverse mode (a probe, ``docs/inference_core.md``,
-    "Speed"). Second derivatives (the Laplace covariance) still work, as the
-    rule is made of differentiable operations. ``tests/test_collapsed.py``
-    checks value, gradient and Hessian against the dense Gaussian, and value
-    and gradient against reverse mode on an ill-conditioned design.
-    """
-    return _factored(Phi, y, d, sd)[0]
-
-
-@log_marginal.defjvp
-def _log_marginal_jvp(primals, tangents):
-    """Value and directional derivative of :func:`log_marginal` (its docstring's formulas)."""
-    Phi, y, d, sd = primals
-    dPhi, dy, dd, dsd = tangents
-    solve = jax.scipy.linalg.solve_triangular
-    # triangular solves throughout, never A⁻¹ itself: with measured errors of 1% A
-    # is ill-conditioned, and an explicit inverse put 0.03 into the demo's log density
-    value, L, z, PD, Dinv = _factored(Phi, y, d, sd)
-    m = solve(L.T, z, lower=False)                  # A⁻¹b
-    alpha = Dinv * y - PD @ m
-    C = solve(L, PD.T, lower=True)                  # L⁻¹Φ'ᵀD⁻¹, (J, n)
-    B = solve(L.T, C, lower=False).T                # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
-    g_Phi = (alpha[:, None] * m[None, :] - B) * sd
-    g_d = 0.5 * (alpha**2 - Dinv + jnp.sum(C * C, axis=0))
-    # 1 − (A⁻¹)_jj = (Φ'ᵀD⁻¹Φ'A⁻¹)_jj = Σ_i Φ'_ij B_ij, as A − I = Φ'ᵀD⁻¹Φ'
-    g_sd = (m**2 - jnp.sum((Phi * sd) * B, axis=0)) / sd
-    return value, jnp.sum(g_Phi * dPhi) - alpha @ dy + g_d @ dd + g_sd @ dsd
-
-
-def conditional_draw(Phi, y, d, sd, eps):
-    """A draw of ``β | y, θ`` from standard-normal ``eps``, and the mean ``E[β | y, θ]``.
-
-    In the whitened coordinates the conditional is ``N(A⁻¹b, A⁻¹)``; with
-    ``A = L Lᵀ`` a draw is ``A⁻¹b + L⁻ᵀ ε``.
-    """
-    _, L, z, _, _ = _factored(Phi, y, d, sd)
-    mean_w = jax.scipy.linalg.solve_triangular(L.T, z, lower=False)
-    noise_w = jax.scipy.linalg.solve_triangular(L.T, eps, lower=False)
-    return sd * (mean_w + noise_w), sd * mean_w
-
-
-def block_log_predictive(Phi, y, d, sd, n_blocks: int):
-    r"""``log p(y_b | y_{−b})`` of each of ``n_blocks`` equal contiguous blocks of ``y``.
-
-    Under the collapsed Gaussian ``y ~ N(0, Σ)``, ``Σ = Φ V Φᵀ + D``, with
-    ``Q = Σ^{-1}`` and ``g = Q y`` the conditional of block ``b`` given the rest is
-
-    .. math::  y_b \mid y_{-b} \sim N\big(y_b - Q_{bb}^{-1} g_b,\ Q_{bb}^{-1}\big),
-
-    so ``log p(y_b | y_{−b}) = −½[g_bᵀ Q_{bb}^{-1} g_b − log|Q_{bb}| + m log 2π]``
-    (block size ``m``): the exact leave-one-recording-out density given θ, the
-    map's coefficients refitted without the recording. It is the pointwise
-    log-likelihood of PSIS-LOO for this non-factorised model (Bürkner, Gabry &
-    Vehtari 2021): ``p(θ | y_{−b}) ∝ p(θ | y) / p(y_b | y_{−b}, θ)``.
-
-    Returns:
-        Shape ``(n_blocks,)``.
-    """
-    n = y.shape[-1]
-    m = n // n_blocks
-    Sigma = (Phi * sd**2) @ Phi.T + jnp.diag(d)
-    Q = jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(Sigma), True), jnp.eye(n))
-    g = Q @ y
-    out = []
-    for b in range(n_blocks):        # a loop, not a batch: XLA's batched Cholesky is slow on CPU
-        sl = slice(b * m, (b + 1) * m)
-        Lb = jnp.linalg.cholesky(Q[sl, sl])
-        z = jax.scipy.linalg.solve_triangular(Lb, g[sl], lower=True)
-        out.append(-0.5 * (z @ z - 2.0 * jnp.sum(jnp.log(jnp.diag(Lb))) + m * jnp.log(2 * jnp.pi)))
-    return jnp.stack(out)
 
 
 def pointwise_log_likelihood(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se,
@@ -730,12 +460,6 @@ def coefficient_marginals(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, co
                       for c in range(2)])
 
 
-def frequency_marginal(spec: CollapsedSpec, theta: dict, sigma_omega, mu, sign, omega, omega_se):
-    """``log p(ω | θ)``, the frequency's coefficients ``γ`` integrated out."""
-    return log_marginal(frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
-                        omega_se**2 + sigma_omega**2, frequency_prior_sd(spec))
-
-
 _JITS: dict[tuple, tuple] = {}
 
 
@@ -743,8 +467,9 @@ def spec_jit(spec: CollapsedSpec, fn):
     """``fn`` with ``spec`` bound, compiled once per spec.
 
     NumPyro runs the model eagerly to find its sites (``initialize_model``), and
-    eagerly every operation of the marginal is compiled on its own: 14 s on the
-    rig with an empty compilation cache, against one compiled call this way.
+    eagerly every operation of the marginal is compiled on its own, many small
+    compilations with an empty compilation cache, against one compiled call
+    this way.
     Inside NUTS's own jit the call is inlined.
     """
     key = (id(spec), fn.__name__)
@@ -819,14 +544,6 @@ def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, cont
     """``E[β | y, θ]`` (J, 2): the map's coefficients at their conditional mean."""
     eps = jnp.zeros((2, spec.n_basis + n_latent(spec, mu.shape[0])))
     return _map_conditional(spec, theta, mu, sign, coeffs, coeffs_se, eps, control)[1]
-
-
-def draw_frequency(spec: CollapsedSpec, theta: dict, mu, sign, omega, omega_se, key):
-    """One exact draw of the frequency coefficients ``γ`` (4,) given one draw ``θ``."""
-    eps = jax.random.normal(key, (len(FREQUENCY_TERMS),))
-    d = omega_se**2 + theta["sigma_omega"] ** 2
-    return conditional_draw(frequency_design(spec, mu, sign, theta), omega - spec.omega_centre,
-                            d, frequency_prior_sd(spec), eps)[0]
 
 
 def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi, control=None):

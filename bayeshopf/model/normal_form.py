@@ -36,8 +36,17 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from bayeshopf.errors import FitError
+
 #: Branch signs in the closed form: +1 stable, −1 unstable.
 STABLE, UNSTABLE = 1.0, -1.0
+
+
+def branch_sign(branch: str) -> float:
+    """``+1`` (stable) or ``−1`` (unstable); a :class:`FitError` for any other name."""
+    if branch not in ("stable", "unstable"):
+        raise FitError(f"branch must be 'stable' or 'unstable'; got {branch!r}")
+    return STABLE if branch == "stable" else UNSTABLE
 
 
 def radial_field(r, mu, mu0, a2, a4=-1.0):

@@ -1,7 +1,7 @@
 """Journal-quality figures of a fit: bifurcation diagram, phase portraits, predictive check.
 
 Every plotting function is pure: it takes result records (a
-:class:`~bayeshopf.diagnostics.bifurcation.BifurcationDiagram`, posterior draws,
+:class:`~bayeshopf.diagnostics.bifurcation.DiagramBands`, posterior draws,
 a :class:`~bayeshopf.diagnostics.ppc.PosteriorPredictiveCheck`, ...) and returns
 a new :class:`matplotlib.figure.Figure` that is not registered with pyplot, so
 no global matplotlib state (current figure, rcParams) is read or changed; or,
@@ -22,10 +22,12 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import Executor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from bayeshopf._lazy import submodule_getattr
 from bayeshopf._preload import figure_worker
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.plotting._io import save_figure
@@ -37,6 +39,7 @@ from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
 
 __all__ = [
     "FIGURE_NAMES",
+    "FigureOptions",
     "coefficient_labels",
     "default_zoom",
     "diagram_grid",
@@ -99,21 +102,37 @@ def _named(names, fmt: str) -> list[str]:
     return [str(Path(n).with_suffix(f".{fmt}")) for n in names]
 
 
-def plot_all(
-    fit,
-    recordings: RecordingSet | None,
-    out_dir: str | os.PathLike[str],
-    truth=None,
-    *,
-    zoom: bool = True,
-    dpi: int = 150,
-    fmt: str = "png",
-    ci: float = 0.9,
-    length_unit: str | None = "auto",
-    angle_unit: str | None = None,
-    offsets: str = "remove",
-    executor: Executor | None = None,
-) -> list[Path]:
+@dataclass(frozen=True)
+class FigureOptions:
+    """How :func:`plot_all` and :func:`start_figures` draw (their keyword arguments).
+
+    Attributes:
+        zoom: Add an inset magnifying the diagram's bands where they are too
+            thin to see at full scale, about the stable recording of largest μ
+            (:func:`~bayeshopf.plotting.diagram.auto_zoom`), placed where it
+            hides nothing.
+        dpi: Resolution of raster files.
+        fmt: File format: ``"png"``, ``"pdf"`` or ``"svg"`` (vector).
+        ci: Level of the bands and intervals.
+        length_unit: Unit of lengths (``"mm"``, …), ``None`` for the fit's
+            own, or ``"auto"``: the one of m, mm, µm in which the largest
+            measured amplitude reads 1–1000.
+        angle_unit: Unit of angles (``"deg"``, …), ``None`` for the fit's own.
+        offsets: ``"remove"`` or ``"keep"`` each recording's mean in the phase
+            portraits and time series.
+    """
+
+    zoom: bool = True
+    dpi: int = 150
+    fmt: str = "png"
+    ci: float = 0.9
+    length_unit: str | None = "auto"
+    angle_unit: str | None = None
+    offsets: str = "remove"
+
+
+def plot_all(fit, recordings: RecordingSet | None, out_dir: str | os.PathLike[str], truth=None,
+             *, executor: Executor | None = None, **options) -> list[Path]:
     """Draw and save the standard figures of a fit.
 
     Writes ``bifurcation.png`` (:func:`plot_bifurcation` with the training
@@ -133,78 +152,42 @@ def plot_all(
         truth: Optional planted system
             (:class:`~bayeshopf.data.synthetic.PlantedHopf`) whose amplitude
             curve and orbits are overlaid.
-        zoom: Add an inset magnifying the diagram about the stable recording
-            of largest μ (:func:`default_zoom`), placed where it hides nothing.
-        dpi: Resolution of raster files.
-        fmt: File format: ``"png"``, ``"pdf"`` or ``"svg"`` (vector).
-        ci: Level of the bands and intervals.
-        length_unit: Unit of lengths (``"mm"``, …), ``None`` for the fit's
-            own, or ``"auto"``: the one of m, mm, µm in which the largest
-            measured amplitude reads 1–1000.
-        angle_unit: Unit of angles (``"deg"``, …), ``None`` for the fit's own.
-        offsets: ``"remove"`` or ``"keep"`` each recording's mean in the phase
-            portraits and time series.
         executor: Optional :class:`concurrent.futures.Executor` (a process
             pool, :func:`figure_worker`) that draws and saves the predictive
             check, the phase portraits (their orbits computed here,
             :func:`~bayeshopf.plotting.phase.phase_panels`), the time series
             and the frequency while this process computes the bands and draws
             the diagram; Matplotlib's drawing holds the interpreter, so a second
-            process is what runs it beside the first (rig fit: the figures
-            stage of ``bayeshopf fit``, ``benchmarks/cli_speed.json``).
+            process is what runs it beside the first.
+        **options: The fields of :class:`FigureOptions` (``zoom``, ``dpi``,
+            ``fmt``, ``ci``, ``length_unit``, ``angle_unit``, ``offsets``).
 
     Returns:
         The paths written, in the order of :data:`FIGURE_NAMES` (then
         :data:`FREQUENCY_FIGURE_NAMES`), less those that need recordings when
         there are none.
     """
-    return start_figures(fit, recordings, out_dir, truth, zoom=zoom, dpi=dpi, fmt=fmt, ci=ci,
-                         length_unit=length_unit, angle_unit=angle_unit, offsets=offsets,
-                         executor=executor)()
+    return start_figures(fit, recordings, out_dir, truth, executor=executor, **options)()
 
 
-def start_figures(
-    fit,
-    recordings: RecordingSet | None,
-    out_dir: str | os.PathLike[str],
-    truth=None,
-    *,
-    zoom: bool = True,
-    dpi: int = 150,
-    fmt: str = "png",
-    ci: float = 0.9,
-    length_unit: str | None = "auto",
-    angle_unit: str | None = None,
-    offsets: str = "remove",
-    executor: Executor | None = None,
-) -> Callable[[], list[Path]]:
+def start_figures(fit, recordings: RecordingSet | None, out_dir: str | os.PathLike[str],
+                  truth=None, *, executor: Executor | None = None, **options
+                  ) -> Callable[[], list[Path]]:
     """:func:`plot_all`, returning before the figures an executor draws are written.
 
-    The figures drawn in this process are written when it returns; the returned
-    function waits for the executor's and returns every path, as :func:`plot_all`
-    does. The CLI writes ``posterior.nc`` in between, while the figure process
-    finishes (``bayeshopf.report.save_hybrid``).
-
-    Args:
-        fit: The fit (:func:`plot_all`).
-        recordings: Its recordings, or ``None``.
-        out_dir: Destination folder.
-        truth: Optional planted system.
-        zoom: Add the diagram's inset.
-        dpi: Resolution of raster files.
-        fmt: ``"png"``, ``"pdf"`` or ``"svg"``.
-        ci: Level of the bands and intervals.
-        length_unit: Unit of lengths (or ``"auto"``).
-        angle_unit: Unit of angles.
-        offsets: ``"remove"`` or ``"keep"`` the recordings' means.
-        executor: The executor that draws the predictive check, the phase
-            portraits, the time series and the frequency, or ``None`` (all
-            drawn here).
+    The arguments are :func:`plot_all`'s. The figures drawn in this process are
+    written when it returns; the returned function waits for the executor's and
+    returns every path, as :func:`plot_all` does. The CLI writes
+    ``posterior.nc`` in between, while the figure process finishes
+    (``bayeshopf.fit_folder.save_hybrid``).
 
     Returns:
         A function without arguments that returns :func:`plot_all`'s paths once
         every figure is written (it raises what a figure's drawing raised).
     """
+    opts = FigureOptions(**options)
+    zoom, dpi, fmt, ci = opts.zoom, opts.dpi, opts.fmt, opts.ci
+    length_unit, angle_unit, offsets = opts.length_unit, opts.angle_unit, opts.offsets
     if fmt not in ("png", "pdf", "svg"):
         raise ValueError(f"fmt must be 'png', 'pdf' or 'svg'; got {fmt!r}")
     out = Path(out_dir)
@@ -228,7 +211,8 @@ def start_figures(
 
     orbit_truth = None if truth is None else (lambda mu, branch: truth.orbit(mu, branch))
     draw(FIGURE_NAMES[2], plot_ppc, ppc, amplitude_units=fit.amplitude_units,
-         amplitude_label=amp_label, length_unit=length_unit)
+         amplitude_label=amp_label, length_unit=length_unit,
+         channels=tuple(fit.spec.frame.names[:2]))
     if recordings is not None:       # the orbits computed here, drawn by the executor
         draw(FIGURE_NAMES[1], draw_phase_panels,
              phase_panels(fit, recordings, truth=orbit_truth, offsets=offsets),
@@ -251,13 +235,13 @@ def start_figures(
         draw(FREQUENCY_FIGURE_NAMES[0], plot_frequency, bands, measured, predictive=pred,
              mu_label=fit.mu_label, mu_units=fit.mu_units, ci=ci)
     # the diagram (its truth is a function of a simulator) is drawn here; the CLI
-    # then writes posterior.nc while the executor finishes (report.save_hybrid)
+    # then writes posterior.nc while the executor finishes (fit_folder.save_hybrid)
     diagram = fit.diagram(mu, ci)
     amp_truth = None if truth is None else (lambda mu, branch: truth.amplitude(mu, branch))
     jobs[FIGURE_NAMES[0]] = save_figure(plot_bifurcation(
         diagram, ppc, mu_label=fit.mu_label, mu_units=fit.mu_units,
         amplitude_units=fit.amplitude_units, amplitude_label=amp_label, truth=amp_truth,
-        zoom=default_zoom(fit, mu) if zoom else None, length_unit=length_unit),
+        zoom="auto" if zoom else None, length_unit=length_unit),
         paths[FIGURE_NAMES[0]], dpi=dpi)
 
     def written() -> list[Path]:
@@ -268,3 +252,6 @@ def start_figures(
 
 def _draw_and_save(builder, args, kwargs, path, dpi) -> Path:
     return save_figure(builder(*args, **kwargs), path, dpi=dpi)
+
+
+__getattr__ = submodule_getattr(__name__)

@@ -79,7 +79,7 @@ def panels(ax, n: int, make) -> tuple[Figure, list[Axes]]:
 
 def z_value(ci: float) -> float:
     """Half-width in standard deviations of the central ``ci`` interval of a normal."""
-    # norm.ppf is ndtri; importing scipy.stats for it took about 1 s of the figure process
+    # norm.ppf is ndtri; importing scipy.stats for it is slow in the figure process
     from scipy.special import ndtri
 
     return float(ndtri(0.5 + ci / 2))

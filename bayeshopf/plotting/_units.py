@@ -2,12 +2,19 @@
 
 Only the axes change: a channel in ``m`` drawn with ``length_unit="mm"`` has
 every value multiplied by 1000 and the label ``[mm]``. Units outside these
-two families (V, N, …) are left as they are.
+two families (V, N, …) are left as they are. :func:`scale_diagram` and
+:func:`scale_ppc` rescale the amplitudes of a diagram's and a check's records.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+
+import numpy as np
+
+from bayeshopf.diagnostics.bifurcation import DiagramBands
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 
 #: Size of each length unit in metres.
 LENGTHS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "µm": 1e-6, "um": 1e-6, "μm": 1e-6, "nm": 1e-9}
@@ -47,3 +54,33 @@ def readable_length(unit: str, largest: float) -> str | None:
         if metres / LENGTHS[name] >= 1.0:
             return name
     return "µm"
+
+
+def scale_diagram(diagram: DiagramBands, factor: float) -> DiagramBands:
+    """The diagram with every amplitude multiplied by ``factor`` (a change of unit)."""
+    def band(b):
+        if b is None:
+            return None
+        return dataclasses.replace(
+            b, quantiles=np.asarray(b.quantiles) * factor,
+            predictive=np.asarray(b.predictive) * factor,
+            to_hopf=None if b.to_hopf is None else np.asarray(b.to_hopf) * factor)
+
+    fa = diagram.fold_amplitude
+    return dataclasses.replace(
+        diagram, stable=band(diagram.stable), unstable=band(diagram.unstable),
+        fold_amplitude=None if fa is None else dataclasses.replace(
+            fa, median=fa.median * factor, lo=fa.lo * factor, hi=fa.hi * factor))
+
+
+def scale_ppc(ppc: PosteriorPredictiveCheck, factor: float) -> PosteriorPredictiveCheck:
+    """The check with every amplitude multiplied by ``factor`` (a change of unit)."""
+    def ivs(items):
+        return tuple(dataclasses.replace(iv, median=iv.median * factor, lo=iv.lo * factor,
+                                         hi=iv.hi * factor) for iv in items)
+
+    return dataclasses.replace(
+        ppc, measured=np.asarray(ppc.measured, float) * factor, curve=ivs(ppc.curve),
+        predictive=ivs(ppc.predictive),
+        measured_se=None if ppc.measured_se is None
+        else np.asarray(ppc.measured_se, float) * factor)

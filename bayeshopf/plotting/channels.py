@@ -5,19 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from bayeshopf.plotting._style import (
-    BRANCH_COLOURS,
-    BRANCH_MARKERS,
-    LABEL_SIZE,
-    LEGEND_SIZE,
-    MEASURED_GREY,
-    TICK_SIZE,
-    axis_label,
-    marker_face,
-    new_figure,
-    panels,
-    style_axes,
-)
+from bayeshopf.plotting import _style
 
 
 def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
@@ -47,32 +35,32 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
     n_rows = int(np.ceil((n_rec + 1) / n_cols))
 
     def make():
-        f = new_figure(3.0 * n_cols, 2.5 * n_rows)
+        f = _style.new_figure(3.0 * n_cols, 2.5 * n_rows)
         return f, f.subplots(n_rows, n_cols, squeeze=False).ravel()
 
-    fig, axes = panels(ax, n_rec + 1, make)
+    fig, axes = _style.panels(ax, n_rec + 1, make)
     units = channel_fit.units
     phi = np.linspace(0.0, 2.0 * np.pi, 128, endpoint=False)
     for i, ax in enumerate(axes[:n_rec]):
-        style_axes(ax)
+        _style.style_axes(ax)
         branch = "unstable" if feats.unstable[i] else "stable"
-        colour = BRANCH_COLOURS[branch]
+        colour = _style.BRANCH_COLOURS[branch]
         ph, y = channel_fit.phases[i]
         step = max(1, ph.size // max_points)
-        ax.plot(ph[::step], y[::step], ls="none", marker=".", ms=1.5, color=MEASURED_GREY,
+        ax.plot(ph[::step], y[::step], ls="none", marker=".", ms=1.5, color=_style.MEASURED_GREY,
                 alpha=0.5, rasterized=True)
         wave = channel_fit.waveform(fit_, float(feats.mu[i]), branch, predictive=True, seed=i)
         lo, med, hi = np.nanquantile(wave, [0.05, 0.5, 0.95], axis=0)
         ax.fill_between(phi, lo, hi, color=colour, alpha=0.25, lw=0)
         ax.plot(phi, med, color=colour, lw=1.6)
-        ax.set_title(f"{feats.mu[i]:g} {fit_.mu_units} ({branch})", fontsize=LABEL_SIZE - 1)
+        ax.set_title(f"{feats.mu[i]:g} {fit_.mu_units} ({branch})", fontsize=_style.LABEL_SIZE - 1)
         ax.set_xlim(0, 2 * np.pi)
         ax.set_xticks([0, np.pi, 2 * np.pi], ["0", "π", "2π"])
-        ax.tick_params(labelsize=TICK_SIZE - 1)
-        ax.set_xlabel("normal-form phase φ", fontsize=LABEL_SIZE - 1)
-        ax.set_ylabel(axis_label(channel_fit.name, units), fontsize=LABEL_SIZE - 1)
+        ax.tick_params(labelsize=_style.TICK_SIZE - 1)
+        ax.set_xlabel("normal-form phase φ", fontsize=_style.LABEL_SIZE - 1)
+        ax.set_ylabel(_style.axis_label(channel_fit.name, units), fontsize=_style.LABEL_SIZE - 1)
     ax = axes[n_rec]
-    style_axes(ax)
+    _style.style_axes(ax)
     mu = np.asarray(feats.mu, float)
     if mu_grid is None:
         span = mu.max() - mu.min()
@@ -80,7 +68,7 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
     for branch, mask in (("stable", ~feats.unstable), ("unstable", feats.unstable)):
         if not mask.any():
             continue
-        colour = BRANCH_COLOURS[branch]
+        colour = _style.BRANCH_COLOURS[branch]
         grid = mu_grid if branch == "stable" else mu_grid[mu_grid <= mu[mask].max() + 1e-9]
         amp = channel_fit.amplitude(fit_, grid, branch, predictive=True)
         lo, med, hi = np.nanquantile(amp, [0.05, 0.5, 0.95], axis=0)
@@ -88,11 +76,13 @@ def plot_channel(channel_fit, fit_, *, mu_grid=None, n_cols: int = 4,
         ax.plot(grid, med, color=colour, lw=1.6, ls="-" if branch == "stable" else "--",
                 label=f"{branch}: median, 90% band")
         ax.plot(mu[mask], channel_fit.measured_amplitude[mask], ls="none",
-                marker=BRANCH_MARKERS[branch], mfc=marker_face(branch), mec=colour, ms=5)
-    ax.set_xlabel(axis_label(fit_.mu_label, fit_.mu_units), fontsize=LABEL_SIZE - 1)
-    ax.set_ylabel(axis_label(f"{channel_fit.name} peak-to-peak", units), fontsize=LABEL_SIZE - 1)
-    ax.legend(fontsize=LEGEND_SIZE - 1)
-    ax.tick_params(labelsize=TICK_SIZE - 1)
+                marker=_style.BRANCH_MARKERS[branch], mfc=_style.marker_face(branch), mec=colour,
+                ms=5)
+    ax.set_xlabel(_style.axis_label(fit_.mu_label, fit_.mu_units), fontsize=_style.LABEL_SIZE - 1)
+    ax.set_ylabel(_style.axis_label(f"{channel_fit.name} peak-to-peak", units),
+                  fontsize=_style.LABEL_SIZE - 1)
+    ax.legend(fontsize=_style.LEGEND_SIZE - 1)
+    ax.tick_params(labelsize=_style.TICK_SIZE - 1)
     for ax in axes[n_rec + 1:]:
         ax.set_visible(False)
     return fig

@@ -23,8 +23,12 @@ def plot_design(result, fit=None, *, axes: tuple[Axes, Axes] | None = None,
     with the recommended measurements marked at their predicted amplitude
     (numbered by rank, with the predicted band as error bars); the lower panel
     is each branch's expected gain (the current width of the target less its
-    expected width after the measurement), with skipped candidates (where the
-    branch may not exist) left out and the recommended ones starred.
+    expected width after the measurement) with a band of two Monte Carlo
+    standard errors, skipped candidates (where the branch may not exist, or its
+    orbit is below the minimum amplitude) left out and the recommended ones
+    starred; for the fold and the Hopf point a dotted line marks the
+    resolution in μ where one was given. The amplitude axis is labelled with
+    the fit's channel (``result.amplitude_label``) and units.
 
     Args:
         result: A :class:`~bayeshopf.design.DesignResult`.
@@ -58,7 +62,8 @@ def plot_design(result, fit=None, *, axes: tuple[Axes, Axes] | None = None,
     if ax_d is not None and fit is not None:
         plot_bifurcation(fit.diagram(ci=result.ci), fit.ppc(ci=result.ci),
                          mu_label=result.mu_label, mu_units=result.mu_units,
-                         amplitude_units=units, ax=ax_d, p_exists=False, legend=False,
+                         amplitude_units=units, amplitude_label=result.amplitude_label,
+                         ax=ax_d, p_exists=False, legend=False,
                          length_unit=length_unit)
         for rank, c in enumerate(result.recommended, start=1):
             a = np.asarray(c.amplitude) * factor
@@ -80,17 +85,25 @@ def plot_design(result, fit=None, *, axes: tuple[Axes, Axes] | None = None,
             continue
         mu = np.array([c.mu for c in rows])
         gain = np.array([np.nan if c.skipped else c.gain for c in rows])
+        se = np.array([np.nan if c.skipped else c.gain_mcse for c in rows])
         if factor != 1.0 and result.target == "diagram":
-            gain = gain * factor
+            gain, se = gain * factor, se * factor
         ax_g.plot(mu, gain, "-" if branch == "stable" else "--", color=COLOURS[branch],
                   marker=".", label=f"{branch} branch")
+        ax_g.fill_between(mu, np.maximum(gain - 2 * se, 0.0), gain + 2 * se,
+                          color=COLOURS[branch], alpha=0.2, lw=0)
     for c in result.recommended:
         g = c.gain * (factor if result.target == "diagram" else 1.0)
         ax_g.plot([c.mu], [g], "*", ms=12, color=COLOURS[c.branch], mec="k", zorder=5)
     ax_g.axhline(0.0, color="0.6", lw=0.8)
-    gain_unit = (f" [{shown_units}]" if result.target == "diagram" and shown_units
-                 else mu_unit)
-    ax_g.set_ylabel(f"expected gain{gain_unit}\n(width now − after)")
+    if result.target != "diagram" and result.resolution > 0:
+        ax_g.axhline(result.resolution, color="0.3", lw=0.8, ls=":",
+                     label=f"resolution {result.resolution:g} {result.mu_units}".rstrip())
+    if result.target == "diagram":
+        what = result.amplitude_label + (f" [{shown_units}]" if shown_units else "")
+    else:
+        what = f"{TARGET_TEXT[result.target]}{mu_unit}"
+    ax_g.set_ylabel(f"expected gain in\n{what}\n(width now − after, ±2 MC se)")
     ax_g.set_xlabel(f"{result.mu_label}{mu_unit}")
     ax_g.legend(loc="best", fontsize=8, frameon=False)
     return fig

@@ -2,34 +2,21 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from matplotlib.legend_handler import HandlerBase, HandlerTuple
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
-from bayeshopf.diagnostics.bifurcation import BifurcationDiagram, BranchBand
+from bayeshopf.diagnostics.bifurcation import BranchBand, DiagramBands
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.errors import DataError
-from bayeshopf.plotting._style import (
-    BRANCH_COLOURS,
-    BRANCH_MARKERS,
-    LABEL_SIZE,
-    LEGEND_SIZE,
-    TICK_SIZE,
-    axis_label,
-    ci_label,
-    marker_face,
-    new_figure,
-    style_axes,
-    tag,
-    z_value,
-)
-from bayeshopf.plotting._units import convert
+from bayeshopf.plotting import _style
+from bayeshopf.plotting._units import convert, scale_diagram, scale_ppc
 
 #: Callable giving the true amplitude, ``truth(mu, branch) -> amplitude``.
 AmplitudeTruth = Callable[[np.ndarray, str], np.ndarray]
@@ -38,14 +25,41 @@ _LINESTYLES = {"stable": "-", "unstable": "--"}
 #: Opacity of the 90% and 50% credible bands.
 _ALPHA_90, _ALPHA_50 = 0.18, 0.38
 _MEDIAN_LW = 2.0
+#: Default axis texts when the caller names neither (``fit.plot.bifurcation`` names both).
+DEFAULT_MU_LABEL = "bifurcation parameter"
+DEFAULT_AMPLITUDE_LABEL = "amplitude (peak-to-peak)"
+#: An automatic inset is drawn when the outer band at its centre is thinner than
+#: this share of the diagram's height (thinner reads as a line at full scale).
+THIN_BAND = 0.05
+
+
+def gap_colour(colour: str) -> tuple[float, float, float]:
+    """The colour seen where both bands of ``colour`` overlap on white.
+
+    The dashed median's gaps take this colour, so that the band looks continuous
+    through them and the dotted predictive lines close by do not show in them
+    (which made the dashed line read as dash-dot); its legend key is drawn alike.
+    """
+    a = 1.0 - (1.0 - _ALPHA_90) * (1.0 - _ALPHA_50)
+    return tuple(float(a * c + (1.0 - a)) for c in to_rgb(colour))
+
+
+def _median_style(branch: str) -> dict:
+    """Line style of a branch's median, shared by the axes and the legend key."""
+    ls = _LINESTYLES[branch]
+    out = dict(color=_style.BRANCH_COLOURS[branch], lw=_MEDIAN_LW, ls=ls)
+    if ls != "-":
+        out["gapcolor"] = gap_colour(_style.BRANCH_COLOURS[branch])
+    return out
 
 
 class _BandKey:
     """Legend key of a branch: 90% band, 50% band and the median line."""
 
-    def __init__(self, colour: str, linestyle: str):
-        self.colour = colour
-        self.linestyle = linestyle
+    def __init__(self, branch: str):
+        self.branch = branch
+        self.colour = _style.BRANCH_COLOURS[branch]
+        self.linestyle = _LINESTYLES[branch]
 
 
 class _BandHandler(HandlerBase):
@@ -60,12 +74,12 @@ class _BandHandler(HandlerBase):
                           alpha=_ALPHA_90, lw=0, transform=trans)
         inner = Rectangle((x0, y0 + 0.2 * height), width, 0.6 * height, facecolor=c,
                           alpha=_ALPHA_50, lw=0, transform=trans)
-        line = Line2D([x0, x0 + width], [y0 + 0.5 * height] * 2, color=c, lw=_MEDIAN_LW,
-                      ls=orig_handle.linestyle, transform=trans)
+        line = Line2D([x0, x0 + width], [y0 + 0.5 * height] * 2, transform=trans,
+                      **_median_style(orig_handle.branch))
         return [outer, inner, line]
 
 
-def _branches(diagram: BifurcationDiagram) -> list[tuple[str, BranchBand]]:
+def _branches(diagram: DiagramBands) -> list[tuple[str, BranchBand]]:
     out = [("stable", diagram.stable)]
     if diagram.unstable is not None:
         out.append(("unstable", diagram.unstable))
@@ -108,7 +122,7 @@ def drawn_quantiles(band: BranchBand, min_p_exists: float = 0.5) -> np.ndarray:
 
 
 def _draw_band(ax: Axes, branch: str, band: BranchBand, min_p_exists: float) -> None:
-    colour = BRANCH_COLOURS[branch]
+    colour = _style.BRANCH_COLOURS[branch]
     keep = np.asarray(band.p_exists) >= min_p_exists
     q = drawn_quantiles(band, min_p_exists)
     mu = np.asarray(band.mu, float)
@@ -118,8 +132,7 @@ def _draw_band(ax: Axes, branch: str, band: BranchBand, min_p_exists: float) -> 
                     gid=f"{branch}-band90")
     ax.fill_between(mu, q[1], q[3], where=ok50, color=colour, alpha=_ALPHA_50, lw=0,
                     gid=f"{branch}-band50")
-    ax.plot(mu, q[2], color=colour, lw=_MEDIAN_LW, ls=_LINESTYLES[branch],
-            gid=f"{branch}-median")
+    ax.plot(mu, q[2], gid=f"{branch}-median", zorder=2.5, **_median_style(branch))
     pred = _masked(np.asarray(band.predictive, float), keep)
     for row in (pred[0], pred[4]):
         ax.plot(mu, row, color=colour, lw=0.8, ls=":", gid=f"{branch}-predictive")
@@ -132,7 +145,7 @@ def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck, bars: str = "measure
     for branch, mask in (("stable", ~unstable), ("unstable", unstable)):
         if not mask.any():
             continue
-        colour = BRANCH_COLOURS[branch]
+        colour = _style.BRANCH_COLOURS[branch]
         if bars == "predictive":
             ivs = [iv for iv, m in zip(ppc.predictive, mask, strict=True) if m]
             centre = np.array([iv.median for iv in ivs])
@@ -140,15 +153,15 @@ def _draw_measured(ax: Axes, ppc: PosteriorPredictiveCheck, bars: str = "measure
                             [iv.hi - iv.median for iv in ivs]])
         elif ppc.measured_se is not None:
             centre = measured[mask]
-            err = z_value(ppc.ci) * np.asarray(ppc.measured_se, float)[mask]
+            err = _style.z_value(ppc.ci) * np.asarray(ppc.measured_se, float)[mask]
         else:
             centre = err = None
         if centre is not None:
             eb = ax.errorbar(mu[mask], centre, yerr=err, fmt="none", ecolor=colour,
                              elinewidth=1.0, capsize=2.5, capthick=1.0, zorder=4)
-            tag(eb, f"{branch}-measured-interval")
-        ax.plot(mu[mask], measured[mask], ls="none", marker=BRANCH_MARKERS[branch], ms=5,
-                mfc=marker_face(branch), mec=colour, mew=1.2, zorder=5,
+            _style.tag(eb, f"{branch}-measured-interval")
+        ax.plot(mu[mask], measured[mask], ls="none", marker=_style.BRANCH_MARKERS[branch], ms=5,
+                mfc=_style.marker_face(branch), mec=colour, mew=1.2, zorder=5,
                 gid=f"{branch}-measured")
 
 
@@ -190,19 +203,19 @@ def _truth_curve(truth: AmplitudeTruth, branch: str, lo: float, hi: float):
     return mu, amp
 
 
-def _draw_points(ax: Axes, diagram: BifurcationDiagram) -> None:
+def _draw_points(ax: Axes, diagram: DiagramBands) -> None:
     """The Hopf point at amplitude 0 and the fold at its amplitude, with 90% intervals."""
     style = dict(color="k", mfc="white", mew=1.2, ms=6, elinewidth=1.0, capsize=3,
                  capthick=1.0, zorder=7, ls="none")
     h0 = diagram.mu0
     hopf = ax.errorbar([h0.median], [0.0], xerr=[[h0.median - h0.lo], [h0.hi - h0.median]],
                        marker="D", **style)
-    tag(hopf, "hopf")
+    _style.tag(hopf, "hopf")
     if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
         f, fa = diagram.mu_fold, diagram.fold_amplitude
         fold = ax.errorbar([f.median], [fa.median], xerr=[[f.median - f.lo], [f.hi - f.median]],
                            yerr=[[fa.median - fa.lo], [fa.hi - fa.median]], marker="^", **style)
-        tag(fold, "fold")
+        _style.tag(fold, "fold")
 
 
 def _draw_all(ax, diagram, ppc, truth_curves, min_p_exists, bars="measured") -> None:
@@ -220,24 +233,25 @@ def _legend_entries(diagram, ppc, truth_curves, mu_units, bars="measured"
     handles: list = []
     labels: list[str] = []
     branches = _branches(diagram)
-    ci = ci_label(diagram.stable.ci)
+    ci = _style.ci_label(diagram.stable.ci)
     for branch, _ in branches:
-        handles.append(_BandKey(BRANCH_COLOURS[branch], _LINESTYLES[branch]))
+        handles.append(_BandKey(branch))
         labels.append(f"{branch} branch: median, 50% and {ci} CI")
-    handles.append(tuple(Line2D([], [], color=BRANCH_COLOURS[b], lw=0.8, ls=":")
+    handles.append(tuple(Line2D([], [], color=_style.BRANCH_COLOURS[b], lw=0.8, ls=":")
                          for b, _ in branches))
     labels.append(f"{ci} predictive band, new recording")
     if ppc is not None:
-        what = (f"{ci_label(ppc.ci)} predictive interval" if bars == "predictive"
-                else f"{ci_label(ppc.ci)} CI over segments"
+        what = (f"{_style.ci_label(ppc.ci)} predictive interval" if bars == "predictive"
+                else f"{_style.ci_label(ppc.ci)} CI over segments"
                 if ppc.measured_se is not None else "")
         unstable = np.asarray(ppc.unstable, bool)
         for branch, present in (("stable", (~unstable).any()), ("unstable", unstable.any())):
             if not present:
                 continue
-            c = BRANCH_COLOURS[branch]
+            c = _style.BRANCH_COLOURS[branch]
             handles.append(Line2D([], [], ls="-" if what else "none", lw=1.0, color=c,
-                                  marker=BRANCH_MARKERS[branch], ms=5, mfc=marker_face(branch),
+                                  marker=_style.BRANCH_MARKERS[branch], ms=5,
+                                  mfc=_style.marker_face(branch),
                                   mec=c, mew=1.2))
             labels.append(f"measured, {branch}" + (f" ({what})" if what else ""))
     if truth_curves:
@@ -245,11 +259,11 @@ def _legend_entries(diagram, ppc, truth_curves, mu_units, bars="measured"
         labels.append("true")
     point = dict(color="k", mfc="white", mew=1.2, ms=6, ls="none")
     handles.append(Line2D([], [], marker="D", **point))
-    labels.append(f"Hopf point ({ci_label(diagram.mu0.mass)} CI): "
+    labels.append(f"Hopf point ({_style.ci_label(diagram.mu0.mass)} CI): "
                   f"{_fmt_interval(diagram.mu0, mu_units)}")
     if diagram.mu_fold is not None and diagram.fold_amplitude is not None:
         handles.append(Line2D([], [], marker="^", **point))
-        labels.append(f"fold ({ci_label(diagram.mu_fold.mass)} CI): "
+        labels.append(f"fold ({_style.ci_label(diagram.mu_fold.mass)} CI): "
                       f"{_fmt_interval(diagram.mu_fold, mu_units)}")
     return handles, labels
 
@@ -261,22 +275,22 @@ def _bar_ends(ppc: PosteriorPredictiveCheck, bars: str) -> np.ndarray:
     m = np.asarray(ppc.measured, float)
     if ppc.measured_se is None:
         return np.array([m, m])
-    e = z_value(ppc.ci) * np.asarray(ppc.measured_se, float)
+    e = _style.z_value(ppc.ci) * np.asarray(ppc.measured_se, float)
     return np.array([m - e, m + e])
 
 
-def _zoom_ylim(diagram, ppc, truth_curves, window, bars="measured"
+def _zoom_ylim(diagram, ppc, truth_curves, window, bars="measured", min_p_exists=0.5
                ) -> tuple[float, float] | None:
-    """The y range of everything drawn inside the μ window (wild predictive values ignored)."""
+    """The y range of the credible bands, data and truth inside the μ window.
+
+    The predictive band is left out (its dotted edges run off the inset), so
+    that the credible bands, the point of the inset, fill a visible share of it.
+    """
     lo, hi = window
     ys = []
     for _, band in _branches(diagram):
         inside = (band.mu >= lo) & (band.mu <= hi)
-        q = np.asarray(band.quantiles, float)[:, inside]
-        ys.append(q.ravel())
-        pred = np.asarray(band.predictive, float)[:, inside]
-        cap = _finite_max(q[4]) * 1.5
-        ys.append(np.where(pred <= cap, pred, np.nan).ravel())
+        ys.append(drawn_quantiles(band, min_p_exists)[:, inside].ravel())
     if ppc is not None:
         inside = (ppc.mu >= lo) & (ppc.mu <= hi)
         ys.append(np.asarray(ppc.measured, float)[inside])
@@ -299,6 +313,43 @@ _CORNERS = tuple(
     for w, h in ((0.30, 0.38), (0.26, 0.34), (0.22, 0.30))
     for x, y in ((0.97 - w, 0.09), (0.09, 0.95 - h), (0.09, 0.09), (0.97 - w, 0.95 - h))
 )
+
+
+def auto_zoom(diagram: DiagramBands, ppc: PosteriorPredictiveCheck | None = None,
+              min_p_exists: float = 0.5, max_change: float = 3.0
+              ) -> tuple[float, float] | None:
+    """μ window of the inset that shows the stable branch's bands where they are thin.
+
+    Centred on the stable recording of largest μ (without recordings, on the
+    largest μ where the stable branch is drawn), its half-width is the largest
+    of 5%, 4%, …, 1% of the grid's span over which the median changes by at most
+    ``max_change`` widths of the outer band at the centre, so the band fills a
+    visible share of the inset's height. ``None`` (no inset) where the band is
+    already visible at full scale: at least :data:`THIN_BAND` of the highest
+    band edge.
+    """
+    band = diagram.stable
+    mu = np.asarray(band.mu, float)
+    q = drawn_quantiles(band, min_p_exists)
+    drawn = np.isfinite(q[0]) & np.isfinite(q[4]) & np.isfinite(q[2])
+    if not drawn.any():
+        return None
+    centre = float(mu[drawn].max())
+    if ppc is not None and (~np.asarray(ppc.unstable, bool)).any():
+        centre = float(np.asarray(ppc.mu, float)[~np.asarray(ppc.unstable, bool)].max())
+    i = int(np.argmin(np.where(drawn, np.abs(mu - centre), np.inf)))
+    width = float(q[4, i] - q[0, i])
+    top = max(_finite_max(drawn_quantiles(b, min_p_exists)[4]) for _, b in _branches(diagram))
+    if not (top > 0 and width >= 0) or width >= THIN_BAND * top:
+        return None
+    span = float(mu.max() - mu.min())
+    for share in (0.05, 0.04, 0.03, 0.02, 0.01):
+        half = share * span
+        inside = drawn & (np.abs(mu - centre) <= half)
+        change = float(np.ptp(q[2, inside])) if inside.any() else 0.0
+        if change <= max_change * max(width, 1e-300):
+            break
+    return max(centre - half, float(mu.min())), min(centre + half, float(mu.max()))
 
 
 def _drawn_points(diagram, ppc, truth_curves) -> np.ndarray:
@@ -332,61 +383,31 @@ def _free_corner(ax: Axes, points: np.ndarray):
     return None
 
 
-def scale_diagram(diagram: BifurcationDiagram, factor: float) -> BifurcationDiagram:
-    """The diagram with every amplitude multiplied by ``factor`` (a change of unit)."""
-    def band(b):
-        if b is None:
-            return None
-        return dataclasses.replace(
-            b, quantiles=np.asarray(b.quantiles) * factor,
-            predictive=np.asarray(b.predictive) * factor,
-            to_hopf=None if b.to_hopf is None else np.asarray(b.to_hopf) * factor)
-
-    fa = diagram.fold_amplitude
-    return dataclasses.replace(
-        diagram, stable=band(diagram.stable), unstable=band(diagram.unstable),
-        fold_amplitude=None if fa is None else dataclasses.replace(
-            fa, median=fa.median * factor, lo=fa.lo * factor, hi=fa.hi * factor))
-
-
-def scale_ppc(ppc: PosteriorPredictiveCheck, factor: float) -> PosteriorPredictiveCheck:
-    """The check with every amplitude multiplied by ``factor`` (a change of unit)."""
-    def ivs(items):
-        return tuple(dataclasses.replace(iv, median=iv.median * factor, lo=iv.lo * factor,
-                                         hi=iv.hi * factor) for iv in items)
-
-    return dataclasses.replace(
-        ppc, measured=np.asarray(ppc.measured, float) * factor, curve=ivs(ppc.curve),
-        predictive=ivs(ppc.predictive),
-        measured_se=None if ppc.measured_se is None
-        else np.asarray(ppc.measured_se, float) * factor)
-
-
-def _draw_p_exists(ax: Axes, diagram: BifurcationDiagram) -> None:
+def _draw_p_exists(ax: Axes, diagram: DiagramBands) -> None:
     """Each branch's posterior probability of existence against μ."""
-    style_axes(ax)
+    _style.style_axes(ax)
     for branch, band in _branches(diagram):
-        ax.plot(band.mu, band.p_exists, color=BRANCH_COLOURS[branch], lw=1.2,
+        ax.plot(band.mu, band.p_exists, color=_style.BRANCH_COLOURS[branch], lw=1.2,
                 ls=_LINESTYLES[branch], gid=f"{branch}-p-exists")
     ax.set_ylim(-0.05, 1.05)
     ax.set_yticks([0, 1])
     ax.minorticks_off()
-    ax.set_ylabel("P(exists)", fontsize=LABEL_SIZE - 1)
+    ax.set_ylabel("P(exists)", fontsize=_style.LABEL_SIZE - 1)
     ax.tick_params(labelbottom=False)
 
 
 def plot_bifurcation(
-    diagram: BifurcationDiagram,
+    diagram: DiagramBands,
     ppc: PosteriorPredictiveCheck | None = None,
     *,
-    mu_label: str = "μ",
+    mu_label: str = DEFAULT_MU_LABEL,
     mu_units: str = "",
     amplitude_units: str = "",
     amplitude_label: str | None = None,
     truth: AmplitudeTruth | None = None,
     min_p_exists: float = 0.5,
     legend: bool = True,
-    zoom: tuple[float, float] | None = None,
+    zoom: tuple[float, float] | str | None = "auto",
     zoom_bounds: tuple[float, float, float, float] | str = "auto",
     ax: Axes | None = None,
     p_exists: bool | Axes | str = "auto",
@@ -395,8 +416,14 @@ def plot_bifurcation(
 ) -> Figure:
     """Plot the posterior bifurcation diagram (amplitude against μ).
 
+    To draw a fit's diagram into axes of one's own, use
+    ``fit.plot.bifurcation(ax=ax)`` (:class:`~bayeshopf.plotting.fit.FitPlots`):
+    it passes the fit's names and units of μ and of the amplitude, which this
+    function, taking result records only, does not know.
+
     Each branch is drawn in its own colour (stable C0, unstable C3): its
-    posterior median as a line (solid stable, dashed unstable), its 50% credible
+    posterior median as a line (solid stable, dashed unstable, the dashes' gaps
+    in the bands' colour, as in the legend), its 50% credible
     band darker and its outer band (the diagram's level, 90% by default)
     lighter, and the predictive band of a new recording (curve uncertainty plus
     scatter) as thin dotted lines. A branch is drawn where it exists in at
@@ -416,18 +443,23 @@ def plot_bifurcation(
         ppc: Posterior predictive check of the training recordings; when given,
             the measured amplitudes are drawn as markers (filled circles stable,
             open squares unstable) with error bars (``bars``).
-        mu_label: Name of μ for the x axis.
+        mu_label: Name of μ for the x axis (default :data:`DEFAULT_MU_LABEL`;
+            ``fit.plot.bifurcation`` passes the fit's).
         mu_units: Unit of μ.
-        amplitude_units: Unit of the amplitude (that of z1).
-        amplitude_label: y-axis text; default ``"peak-to-peak of z1"``.
+        amplitude_units: Unit of the amplitude (that of the first planar channel).
+        amplitude_label: y-axis text; default :data:`DEFAULT_AMPLITUDE_LABEL`
+            (``fit.plot.bifurcation`` passes ``"peak-to-peak of <channel>"``).
         truth: Optional ``truth(mu, branch) -> amplitude`` drawn as thin black
             lines (e.g. the planted system of a synthetic data set), in
             ``amplitude_units``.
         min_p_exists: Smallest posterior probability of existence at which a
             branch's band is drawn.
         legend: Whether to add a legend (below the axes).
-        zoom: Optional μ window ``(lo, hi)`` shown magnified in an inset, for
-            bands too narrow to see at full scale.
+        zoom: μ window ``(lo, hi)`` shown magnified in an inset, for bands too
+            narrow to see at full scale; ``"auto"`` (default) the window of
+            :func:`auto_zoom`, none where the bands are visible at full scale;
+            ``None`` no inset. The inset's y range follows the credible bands,
+            the data and the truth in the window, not the predictive band.
         zoom_bounds: Inset position ``(x0, y0, width, height)`` in axes
             fractions, or ``"auto"``: the first corner of the axes (lower right,
             upper left, lower left, upper right) clear of the curves and
@@ -462,10 +494,10 @@ def plot_bifurcation(
     p_ax = None
     if ax is None:
         if p_exists is False:
-            fig = new_figure(6.4, 5.0)
+            fig = _style.new_figure(6.4, 5.0)
             ax = fig.add_subplot()
         else:
-            fig = new_figure(6.4, 5.6)
+            fig = _style.new_figure(6.4, 5.6)
             grid = fig.add_gridspec(2, 1, height_ratios=(1, 6))
             ax = fig.add_subplot(grid[1])
             p_ax = fig.add_subplot(grid[0], sharex=ax)
@@ -475,7 +507,7 @@ def plot_bifurcation(
             p_ax = p_exists
         elif p_exists is True:
             p_ax = ax.inset_axes([0.0, 1.04, 1.0, 0.16], sharex=ax)
-    style_axes(ax)
+    _style.style_axes(ax)
     mu_all = np.asarray(diagram.stable.mu, float)
     mu_lo, mu_hi = float(mu_all.min()), float(mu_all.max())
     truth_curves = []
@@ -499,21 +531,25 @@ def plot_bifurcation(
     top = float(top) if np.isfinite(top) and top > 0 else 1.0
     ax.set_xlim(mu_lo, mu_hi)
     ax.set_ylim(-0.04 * top, 1.08 * top)
-    ax.set_xlabel(axis_label(mu_label, mu_units), fontsize=LABEL_SIZE)
-    ax.set_ylabel(axis_label(amplitude_label or "peak-to-peak of z1", amplitude_units),
-                  fontsize=LABEL_SIZE)
+    ax.set_xlabel(_style.axis_label(mu_label, mu_units), fontsize=_style.LABEL_SIZE)
+    ax.set_ylabel(_style.axis_label(amplitude_label or DEFAULT_AMPLITUDE_LABEL, amplitude_units),
+                  fontsize=_style.LABEL_SIZE)
 
+    if isinstance(zoom, str):
+        if zoom != "auto":
+            raise ValueError(f"zoom must be 'auto', None or a (lo, hi) window; got {zoom!r}")
+        zoom = auto_zoom(diagram, ppc, min_p_exists)
     if zoom is not None:
-        ylim = _zoom_ylim(diagram, ppc, truth_curves, zoom, bars)
+        ylim = _zoom_ylim(diagram, ppc, truth_curves, zoom, bars, min_p_exists)
         bounds = zoom_bounds
         if isinstance(zoom_bounds, str):
             bounds = _free_corner(ax, _drawn_points(diagram, ppc, truth_curves))
         if ylim is not None and bounds is not None:
             inset = ax.inset_axes(list(bounds))
             _draw_all(inset, diagram, ppc, truth_curves, min_p_exists, bars)
-            style_axes(inset, grid=False)
+            _style.style_axes(inset, grid=False)
             inset.minorticks_off()
-            inset.tick_params(labelsize=TICK_SIZE - 1.5, pad=2)
+            inset.tick_params(labelsize=_style.TICK_SIZE - 1.5, pad=2)
             inset.locator_params(nbins=3)
             inset.set_xlim(*zoom)
             inset.set_ylim(*ylim)
@@ -523,7 +559,7 @@ def plot_bifurcation(
     if legend:
         handles, labels = _legend_entries(diagram, ppc, truth_curves, mu_units, bars)
         ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
-                  fontsize=LEGEND_SIZE, frameon=False, handlelength=3.0, handleheight=1.5,
+                  fontsize=_style.LEGEND_SIZE, frameon=False, handlelength=3.0, handleheight=1.5,
                   columnspacing=1.5,
                   handler_map={tuple: HandlerTuple(ndivide=None, pad=0.3),
                                _BandKey: _BandHandler()})

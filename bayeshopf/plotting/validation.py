@@ -8,20 +8,9 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from bayeshopf.errors import DataError
-from bayeshopf.plotting._style import (
-    BRANCH_COLOURS,
-    BRANCH_MARKERS,
-    LABEL_SIZE,
-    LEGEND_SIZE,
-    TICK_SIZE,
-    axis_label,
-    marker_face,
-    new_figure,
-    panels,
-    style_axes,
-)
-from bayeshopf.plotting._units import convert
-from bayeshopf.plotting.diagram import _draw_band, scale_diagram
+from bayeshopf.plotting import _style
+from bayeshopf.plotting._units import convert, scale_diagram
+from bayeshopf.plotting.diagram import _draw_band
 from bayeshopf.validation import plug_in_amplitude
 
 #: Colour and line style of the MAP plug-in curve.
@@ -72,17 +61,17 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
     n_rows = int(np.ceil(n_panels / n_cols))
 
     def make():
-        f = new_figure(3.1 * n_cols, 2.7 * n_rows)
+        f = _style.new_figure(3.1 * n_cols, 2.7 * n_rows)
         return f, f.subplots(n_rows, n_cols, squeeze=False).ravel()
 
     own = ax is None
-    fig, axes = panels(ax, n_panels, make)
+    fig, axes = _style.panels(ax, n_panels, make)
     names = list(features.names)
     factor, amplitude_units = convert(amplitude_units, length_unit)
     amplitude = factor * np.asarray(features.amplitude, float)
     y_max = 1.25 * float(np.nanmax(amplitude))
     for ax, fold in zip(axes, loo.folds, strict=False):
-        style_axes(ax)
+        _style.style_axes(ax)
         post = fold.fit
         branches = ("stable", "unstable") if post.criticality == "subcritical" else ("stable",)
         if "bayes" in loo.methods:
@@ -97,41 +86,45 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
         keep = np.array([n != fold.name for n in names])
         for branch, mask in (("stable", ~features.unstable), ("unstable", features.unstable)):
             sel = keep & mask
-            ax.plot(mu_all[sel], amplitude[sel], ls="none", marker=BRANCH_MARKERS[branch],
-                    ms=4.5, mfc=marker_face(branch), mec=BRANCH_COLOURS[branch], mew=1.0, zorder=5)
+            ax.plot(mu_all[sel], amplitude[sel], ls="none", marker=_style.BRANCH_MARKERS[branch],
+                    ms=4.5, mfc=_style.marker_face(branch), mec=_style.BRANCH_COLOURS[branch],
+                    mew=1.0, zorder=5)
         inside = fold.inside("bayes") if "bayes" in fold.predictions else False
         ax.plot([fold.mu], [factor * fold.measured], ls="none", marker="*", ms=13, mec="k", mew=1.0,
                 mfc="gold" if inside else "white", zorder=6)
-        ax.set_title(f"without {fold.mu:g} {mu_units} ({fold.branch})", fontsize=LABEL_SIZE - 1)
+        ax.set_title(f"without {fold.mu:g} {mu_units} ({fold.branch})",
+                     fontsize=_style.LABEL_SIZE - 1)
         ax.set_xlim(mu_grid[0], mu_grid[-1])
         ax.set_ylim(0, y_max)
-        ax.tick_params(labelsize=TICK_SIZE - 1)
+        ax.tick_params(labelsize=_style.TICK_SIZE - 1)
     for ax in axes[: len(loo.folds)]:
-        ax.set_xlabel(axis_label(mu_label, mu_units), fontsize=LABEL_SIZE - 1)
-        ax.set_ylabel(axis_label("amplitude", amplitude_units), fontsize=LABEL_SIZE - 1)
+        ax.set_xlabel(_style.axis_label(mu_label, mu_units), fontsize=_style.LABEL_SIZE - 1)
+        ax.set_ylabel(_style.axis_label("amplitude", amplitude_units),
+                      fontsize=_style.LABEL_SIZE - 1)
     ax = axes[len(loo.folds)]
-    style_axes(ax)
+    _style.style_axes(ax)
     x = np.arange(len(loo.folds))
     if "bayes" in loo.methods:
         fm = np.array([f.predictions["bayes"].mu_fold for f in loo.folds])
         ax.errorbar(x, fm[:, 0], yerr=[fm[:, 0] - fm[:, 1], fm[:, 2] - fm[:, 0]], fmt="o",
-                    color=BRANCH_COLOURS["stable"], capsize=3, ms=4, label="Bayesian, 90%")
+                    color=_style.BRANCH_COLOURS["stable"], capsize=3, ms=4, label="Bayesian, 90%")
     if "map" in loo.methods:
         v = [f.predictions["map"].mu_fold[0] for f in loo.folds]
         ax.plot(x + 0.15, v, ls="none", marker="s", color=POINT_COLOUR, ms=5, label="MAP")
-    ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=TICK_SIZE - 2,
+    ax.set_xticks(x, [f"{f.mu:g}{f.branch[0]}" for f in loo.folds], fontsize=_style.TICK_SIZE - 2,
                   rotation=45)
     ax.set_xlim(-0.5, len(loo.folds) - 0.2)
     ax.margins(y=0.1)            # an interval's end on the axis would lose its cap
-    ax.set_xlabel("held-out recording (s: stable, u: unstable)", fontsize=LABEL_SIZE - 2)
-    ax.set_ylabel(axis_label("fold μ_SN", mu_units), fontsize=LABEL_SIZE - 1)
-    ax.set_title("fold per fold", fontsize=LABEL_SIZE - 1)
-    ax.legend(fontsize=LEGEND_SIZE - 2, loc="best")
+    ax.set_xlabel("held-out recording (s: stable, u: unstable)", fontsize=_style.LABEL_SIZE - 2)
+    ax.set_ylabel(_style.axis_label("fold μ_SN", mu_units), fontsize=_style.LABEL_SIZE - 1)
+    ax.set_title("fold per fold", fontsize=_style.LABEL_SIZE - 1)
+    ax.legend(fontsize=_style.LEGEND_SIZE - 2, loc="best")
     for ax in axes[n_panels:]:
         ax.set_visible(False)
     handles = [
-        Patch(color=BRANCH_COLOURS["stable"], alpha=0.35, label="Bayesian stable (50/90%)"),
-        Patch(color=BRANCH_COLOURS["unstable"], alpha=0.35, label="Bayesian unstable (50/90%)"),
+        Patch(color=_style.BRANCH_COLOURS["stable"], alpha=0.35, label="Bayesian stable (50/90%)"),
+        Patch(color=_style.BRANCH_COLOURS["unstable"], alpha=0.35,
+              label="Bayesian unstable (50/90%)"),
         Line2D([], [], color="k", ls=":", lw=0.8, label="90% band of a new recording"),
         *([Line2D([], [], color=POINT_COLOUR, ls=POINT_STYLE, label="MAP plug-in")]
           if "map" in loo.methods else []),      # drawn only where the folds have it
@@ -140,7 +133,7 @@ def plot_leave_one_out(loo, features, *, mu_grid=None, mu_label: str = "airspeed
     ]
     if own:
         fig.legend(handles=handles, loc="outside lower center", ncol=3,
-                   fontsize=LEGEND_SIZE - 1, frameon=False)
+                   fontsize=_style.LEGEND_SIZE - 1, frameon=False)
     else:
-        axes[0].legend(handles=handles, loc="upper left", fontsize=LEGEND_SIZE - 2)
+        axes[0].legend(handles=handles, loc="upper left", fontsize=_style.LEGEND_SIZE - 2)
     return fig

@@ -20,24 +20,25 @@ Example::
     from bayeshopf.simulators import bifurcation_diagram, get_system, simulate_recordings
 
     flutter = get_system("flutter3dof")
-    diagram = bifurcation_diagram(flutter)         # Hopf 18.27 m/s, fold 14.94 m/s
+    diagram = bifurcation_diagram(flutter)         # Hopf point, fold, branches
     orbit = diagram.orbit_at(16.5, "unstable")      # PeriodicOrbit: period, amplitude, floquet
     rs = simulate_recordings(flutter, mu=[15.5, 16.5], branch=["stable", "unstable"])
 """
 
 from __future__ import annotations
 
+from bayeshopf._lazy import submodule_getattr
+from bayeshopf.simulators.arclength import BifurcationDiagram as BifurcationDiagram
+from bayeshopf.simulators.arclength import Branch as Branch
+from bayeshopf.simulators.arclength import Fold as Fold
+from bayeshopf.simulators.arclength import continue_from_hopf as continue_from_hopf
+from bayeshopf.simulators.arclength import orbit_at as orbit_at
 from bayeshopf.simulators.base import ExtraForce as ExtraForce
 from bayeshopf.simulators.base import Rhs as Rhs
 from bayeshopf.simulators.base import SimulationError as SimulationError
 from bayeshopf.simulators.base import System as System
 from bayeshopf.simulators.base import UncertainParameter as UncertainParameter
-from bayeshopf.simulators.continuation import BifurcationDiagram as BifurcationDiagram
-from bayeshopf.simulators.continuation import Branch as Branch
-from bayeshopf.simulators.continuation import Fold as Fold
 from bayeshopf.simulators.continuation import bifurcation_diagram as bifurcation_diagram
-from bayeshopf.simulators.continuation import continue_from_hopf as continue_from_hopf
-from bayeshopf.simulators.continuation import orbit_at as orbit_at
 from bayeshopf.simulators.equilibria import HopfPoint as HopfPoint
 from bayeshopf.simulators.equilibria import eigenvalues as eigenvalues
 from bayeshopf.simulators.equilibria import equilibrium as equilibrium
@@ -54,3 +55,5 @@ from bayeshopf.simulators.registry import available_systems as available_systems
 from bayeshopf.simulators.registry import get_system as get_system
 from bayeshopf.simulators.registry import register_system as register_system
 from bayeshopf.simulators.vanderpol import VANDERPOL as VANDERPOL
+
+__getattr__ = submodule_getattr(__name__)

@@ -56,9 +56,8 @@ term vanishes, so the lag state drives only the heave equation.
 
 The parameter values are those of the authors' code: :math:`c_\alpha` and
 :math:`k_\alpha` to full precision (Table t1 rounds them) and
-:math:`k_{\alpha3} = 5006` (Table t1 says 5006.7; the difference moves the fold
-by less than 0.001 m/s). Heave ``h`` (m) and pitch ``alpha`` (rad) are observed;
-:math:`w` never is.
+:math:`k_{\alpha3} = 5006` (Table t1 says 5006.7). Heave ``h`` (m) and
+pitch ``alpha`` (rad) are observed; :math:`w` never is.
 
 **Uncertain parameters** (:data:`FLUTTER_UNCERTAIN`, priors centred on the
 values above; :class:`~bayeshopf.simulators.base.UncertainParameter`). The

@@ -8,8 +8,8 @@ where :math:`\varphi_T` is the flow and the second (phase) condition puts
 :math:`x_0` on the hyperplane through a reference point :math:`\hat x` (a
 guess, or the previous orbit of a continuation) orthogonal to the flow there.
 With time scaled to :math:`s = t/T \in [0, 1]`, one adaptive diffrax solve
-(Tsit5, tolerances ``rtol``/``atol``) integrates the state together with its
-variational equations
+(Dormand–Prince 8(7), ``diffrax.Dopri8``; tolerances ``rtol``/``atol``)
+integrates the state together with its variational equations
 
 .. math::
 
@@ -52,13 +52,16 @@ _PTP_REFINE = 16
 
 
 class Shot(NamedTuple):
-    """One shooting solve: end point, its derivatives, and whether the solver succeeded."""
+    """Shooting solves: end point, its derivatives, and whether the solver succeeded.
+
+    One orbit's, or a batch's with the orbits along the leading axis.
+    """
 
     x1: np.ndarray
     monodromy: np.ndarray
     dx_dmu: np.ndarray
     f1: np.ndarray
-    ok: bool
+    ok: bool | np.ndarray
 
 
 @functools.lru_cache(maxsize=64)
@@ -67,27 +70,44 @@ def param_tree(system: System) -> dict:
     return system.param_tree()
 
 
+#: Largest number of solver steps per period.
+MAX_STEPS = 2**16
+
+
 class _Kernels(NamedTuple):
     f: object
     shoot: object
     sample: object
     sample_batch: object
+    f_batch: object
+    shoot_batch: object
 
 
-def kernels(system: System, rtol: float = RTOL, atol: float = ATOL) -> _Kernels:
-    """Compiled shooting and sampling functions of one system.
+def kernels(system: System, rtol: float = RTOL, atol: float = ATOL, *,
+            max_steps: int = MAX_STEPS, mu_sensitivity: bool = True) -> _Kernels:
+    r"""Compiled shooting and sampling functions of one system, one orbit or a batch.
+
+    ``shoot(x0, T, mu, p)`` integrates one period of the state with its
+    variational equations (module docstring) and returns one flat array
+    :math:`(x_1, \Phi(1), w(1), f(x_1, \mu), \text{ok})` (see :func:`split_shot`);
+    ``sample(x0, T, mu, p, n)`` gives the states at :math:`t_k = kT/n`. The
+    ``*_batch`` forms map them over a leading axis of ``x0``, ``T`` and ``mu``
+    (one set of parameters ``p``). Without ``mu_sensitivity`` the solve leaves
+    out :math:`w` (returned as zeros), which also takes it out of the step
+    size control. A solve that needs more than ``max_steps`` steps fails
+    (``ok`` false) instead of raising.
 
     Cached per right-hand side, not per system: the parameters are arguments
     (:func:`param_tree`), so the copies of a system that differ in their
     parameter values only (``System.with_params``: the calibration's and the
-    continuation's variants) share one traced and compiled solver. Tracing
-    diffrax's Dopri8 with the variational equations takes about 1 s.
+    continuation's variants) share one traced and compiled solver.
     """
-    return _kernels(system.rhs, rtol, atol)
+    return _kernels(system.rhs, rtol, atol, max_steps, mu_sensitivity)
 
 
 @functools.lru_cache(maxsize=32)
-def _kernels(rhs, rtol: float, atol: float) -> _Kernels:
+def _kernels(rhs, rtol: float, atol: float, max_steps: int = MAX_STEPS,
+             mu_sensitivity: bool = True) -> _Kernels:
     ensure_x64()
     jac_x = jax.jacfwd(rhs, argnums=0)
     jac_mu = jax.jacfwd(rhs, argnums=1)
@@ -100,14 +120,21 @@ def _kernels(rhs, rtol: float, atol: float) -> _Kernels:
         J = jac_x(x, mu, p)
         return T * rhs(x, mu, p), T * (J @ phi), T * (J @ w + jac_mu(x, mu, p))
 
+    def aug_x(s, y, args):
+        x, phi = y
+        T, mu, p = args
+        return T * rhs(x, mu, p), T * (jac_x(x, mu, p) @ phi)
+
     def shoot(x0, T, mu, p):
         n = x0.shape[0]
+        y0 = (x0, jnp.eye(n), jnp.zeros(n)) if mu_sensitivity else (x0, jnp.eye(n))
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(aug), solver, 0.0, 1.0, None, (x0, jnp.eye(n), jnp.zeros(n)),
+            diffrax.ODETerm(aug if mu_sensitivity else aug_x), solver, 0.0, 1.0, None, y0,
             args=(T, mu, p), stepsize_controller=ctrl, saveat=diffrax.SaveAt(t1=True),
-            max_steps=2**16, throw=False,
+            max_steps=max_steps, throw=False,
         )
-        x1, phi, w = (leaf[-1] for leaf in sol.ys)
+        x1, phi, *w = (leaf[-1] for leaf in sol.ys)
+        w = w[0] if mu_sensitivity else jnp.zeros(n)
         ok = (sol.result == diffrax.RESULTS.successful).astype(x0.dtype)
         # one flat array: a single device-to-host transfer per shot
         return jnp.concatenate([x1, phi.ravel(), w, rhs(x1, mu, p), ok[None]])
@@ -120,7 +147,7 @@ def _kernels(rhs, rtol: float, atol: float) -> _Kernels:
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(field_), solver, 0.0, 1.0, None, x0, args=(T, mu, p),
             stepsize_controller=ctrl, saveat=diffrax.SaveAt(ts=jnp.arange(n) / n),
-            max_steps=2**16, throw=False,
+            max_steps=max_steps, throw=False,
         )
         return sol.ys
 
@@ -129,7 +156,17 @@ def _kernels(rhs, rtol: float, atol: float) -> _Kernels:
         shoot=jax.jit(shoot),
         sample=jax.jit(sample, static_argnums=4),
         sample_batch=jax.jit(jax.vmap(sample, in_axes=(0, 0, 0, None, None)), static_argnums=4),
+        f_batch=jax.jit(jax.vmap(rhs, in_axes=(0, 0, None))),
+        shoot_batch=jax.jit(jax.vmap(shoot, in_axes=(0, 0, 0, None))),
     )
+
+
+def split_shot(out: np.ndarray, n: int) -> Shot:
+    """The parts of ``shoot``'s flat output (last axis) for ``n`` states, any leading axes."""
+    lead = out.shape[:-1]
+    return Shot(x1=out[..., :n], monodromy=out[..., n:n + n * n].reshape(*lead, n, n),
+                dx_dmu=out[..., n + n * n:2 * n + n * n], f1=out[..., 2 * n + n * n:3 * n + n * n],
+                ok=out[..., -1] > 0.5)
 
 
 def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) -> Shot:
@@ -140,9 +177,8 @@ def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) 
     out = np.asarray(k.shoot(jnp.asarray(x0, dtype=jnp.float64),
                              jnp.asarray(T, dtype=jnp.float64),
                              jnp.asarray(mu, dtype=jnp.float64), param_tree(system)))
-    x1, phi = out[:n], out[n:n + n * n].reshape(n, n)
-    w, f1 = out[n + n * n:2 * n + n * n], out[2 * n + n * n:3 * n + n * n]
-    return Shot(x1, phi, w, f1, bool(out[-1] > 0.5))
+    s = split_shot(out, n)
+    return s._replace(ok=bool(s.ok))
 
 
 def sample_orbit(system: System, x0, T, mu, n_points: int = N_POINTS, *,

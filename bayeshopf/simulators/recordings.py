@@ -44,14 +44,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from bayeshopf._atomic import swap_in
+from bayeshopf._atomic import new_folder, vacant_folder
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.data.io import write_interchange
 from bayeshopf.data.recording import Recording, RecordingSet
@@ -289,28 +287,15 @@ def write_simulation(rs: RecordingSet, folder: str | os.PathLike[str], *,
         OutputError: If ``folder`` is a file, or is not empty and ``overwrite``
             is false, or cannot be written.
     """
-    folder = Path(folder)
-    if folder.exists():
-        if not folder.is_dir():
-            raise OutputError(f"{folder}: a folder to write into expected; found a file")
-        if any(folder.iterdir()) and not overwrite:
-            raise OutputError(
-                f"{folder}: an empty or new folder expected; found a non-empty folder "
-                "(use --force / overwrite=True to replace it)"
-            )
-    tag = uuid.uuid4().hex[:8]
-    tmp = folder.parent / f".{folder.name}.sim-{tag}"
+    folder = vacant_folder(folder, overwrite, "overwrite=True replaces it")
     try:
-        write_interchange(rs, tmp)
-        if info is not None:
-            (tmp / SIMULATION_INFO).write_text(json.dumps(info, indent=2) + "\n",
-                                               encoding="utf-8")
-        swap_in(tmp, folder, tag)
+        with new_folder(folder) as tmp:
+            write_interchange(rs, tmp)
+            if info is not None:
+                (tmp / SIMULATION_INFO).write_text(json.dumps(info, indent=2) + "\n",
+                                                   encoding="utf-8")
     except OutputError:
         raise
     except OSError as exc:
         raise OutputError(f"{folder}: cannot be written ({type(exc).__name__}: {exc})") from exc
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return folder

@@ -10,7 +10,7 @@ system is
 
 .. math::  a_2 = 2\sqrt{\mu_0 - \mu_{SN}}
 
-(3.654 for the 3-DOF aerofoil, the paper's 3.65). For a supercritical system
+(the paper reports 3.65 for the 3-DOF aerofoil). For a supercritical system
 the scale of :math:`a_2` is set by the learnt map and has no true value;
 :math:`\mu_0` is the check.
 
@@ -21,8 +21,8 @@ Near the Hopf point :math:`\mu_0 - \mu \propto A^2` and near a fold
 function of :math:`A` along a branch while :math:`A(\mu)` has square-root ends.
 :func:`amplitude_truth` therefore interpolates :math:`\mu(A)` on each branch by
 a cubic spline (with the Hopf point :math:`(\mu_0, 0)` added) and inverts it
-on a dense grid; inside a branch it agrees with Newton-corrected orbits
-(:func:`~bayeshopf.simulators.orbit_at`) to about :math:`10^{-5}` relative.
+on a dense grid; inside a branch it is checked against Newton-corrected
+orbits (:func:`~bayeshopf.simulators.orbit_at`).
 
 **The experiments** (:func:`flutter_experiment`, :func:`vanderpol_experiment`)
 are the paper's Section 4 data sets made blind and realistic: noisy recordings
@@ -64,10 +64,9 @@ __all__ = [
 #: Training plan of the 3-DOF aerofoil (m/s): 4 stable and 4 unstable LCOs
 #: spread over the bistable range (fold 14.94, Hopf 18.27 m/s), the outer ones
 #: within 0.1–0.3 m/s of the fold and the Hopf point, as a CBC experiment can
-#: measure them. (A plan whose unstable orbits stop 0.5 m/s short of the Hopf
+#: measure them. (A plan whose unstable orbits stop well short of the Hopf
 #: point, such as the simulator's ``default_plan``, leaves μ0 and the fold to an
-#: extrapolation that biases both low by about 0.1 m/s, as measured with an
-#: earlier inference core.)
+#: extrapolation.)
 FLUTTER_PLAN: tuple[tuple[float, str], ...] = (
     (15.0, "stable"), (15.8, "stable"), (16.6, "stable"), (17.4, "stable"),
     (15.1, "unstable"), (16.2, "unstable"), (17.2, "unstable"), (18.0, "unstable"),
@@ -335,8 +334,7 @@ def flutter_experiment(
 
     Returns:
         ``(recordings, truth)``: the :class:`~bayeshopf.data.recording.RecordingSet`
-        and its :class:`SimulatedTruth` (Hopf 18.2747 m/s, fold 14.9362 m/s,
-        a2 = 3.654).
+        and its :class:`SimulatedTruth`.
     """
     ensure_x64()
     duration, rate = (8.0, 250.0) if fast else (20.0, 500.0)

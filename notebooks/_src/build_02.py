@@ -20,8 +20,7 @@ Pol oscillator** (supercritical Hopf point at μ = 0) and a **3-DOF aeroelastic 
 Hopf point at 18.27 m/s, fold of cycles at 14.94 m/s). Their fits were started with μ0 and a2 at the
 true values, on noise-free data, and gave point estimates.
 
-Here both are refitted **blind** on the collapsed core (`bayeshopf.posterior.fit_hybrid`, as
-`bayeshopf fit` does): a deterministic start from the data, the MAP, then NUTS over the normal form
+Here both are refitted **blind** with `bh.fit` (as `bayeshopf fit` does): a deterministic start from the data, the MAP, then NUTS over the normal form
 and the hyperparameters with the map's linear coefficients integrated out exactly. The recordings
 carry 1 % measurement noise and sensor offsets, and every result has a 90 % interval. The truth is
 the simulator's own (`bayeshopf.simulators`): the Hopf point from the Jacobian eigenvalues, and the
@@ -32,7 +31,7 @@ checks:
 * orbits at μ values **not used for training** lie inside the 90 % posterior predictive bands;
 * the fitted bifurcation diagram and phase portraits follow the true ones;
 * the fit's own checks pass (NUTS R̂ and bulk ESS, orbit errors, predictive checks:
-  `post.diagnostics`);
+  `fit.diagnostics`);
 * over 20 noise seeds, the intervals cover the truth at about their nominal rate
   (`benchmarks/bench_calibration_collapsed.py`, summarised at the end).
 
@@ -42,46 +41,32 @@ chains, whose convergence checks then usually warn)."""),
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
 
-import json
 import warnings
 from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-configure_xla_cpu()  # before any JAX work, as the CLI does
-
 import numpy as np
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
-from bayeshopf.features.harmonics import extract_harmonics
-from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.plotting import plot_phase_portraits, plot_ppc
-from bayeshopf.posterior import fit_hybrid
-from bayeshopf.plotting.truth import plot_diagram_vs_truth
-from bayeshopf.simulators.truth import (
-    flutter_experiment,
-    held_out_check,
-    held_out_recordings,
-    vanderpol_experiment,
-)
+import bayeshopf.plotting.truth  # loads bh.plotting.truth
+import bayeshopf.simulators.truth  # loads bh.simulators.truth (the simulated experiments)
 
 %matplotlib inline
-settings = CollapsedSettings.fast() if FAST else CollapsedSettings()
+settings = bh.Settings.fast() if FAST else bh.Settings()
 print(f"bayeshopf {bh.__version__}; fast mode: {FAST}; NUTS {settings.num_chains} chains x "
       f"({settings.num_warmup} + {settings.num_samples})")
 
 
-def interval_table(result, truth):
+def interval_table(fit, truth):
     # μ0 and the fold against the truth (a2 too under the paper's linear unfolding)
-    curved = result.spec.unfolding == "curved"
+    curved = fit.spec.unfolding == "curved"
     rows = ["| quantity | median | 90% interval | true | inside? |", "|---|---:|---|---:|---|"]
     for q, true in truth.values().items():
         if true is None or (q == "a2" and curved):
             continue
-        iv = result.interval(q)
+        iv = fit.interval(q)
         rows.append(f"| {q} | {iv.median:.4f} | [{iv.lo:.4f}, {iv.hi:.4f}] | {true:.4f} "
                     f"| {'yes' if iv.contains(true) else '**no**'} |")
     display(Markdown("\\n".join(rows)))
@@ -98,9 +83,9 @@ def held_out_table(rows, unit):
     print(f"{n_in}/{len(rows)} held-out orbits inside their 90% predictive intervals")
 
 
-def show_diagnostics(result):
+def show_diagnostics(fit):
     # the fit's own checks: MAP, NUTS convergence, orbit errors, warnings
-    d = result.diagnostics
+    d = fit.diagnostics.details
     p = d["posterior"]
     line = f"MAP gradient norm {d['map']['grad_norm']:.1e} ({'converged' if d['map']['converged'] else 'NOT converged'})"
     if p["method"] == "nuts" and p["sites"]:
@@ -113,9 +98,9 @@ def show_diagnostics(result):
     print(f"orbit errors {100 * min(errs):.2f}-{100 * max(errs):.2f}% of the orbit size; "
           f"amplitudes inside their 90% predictive bands: {sum(d['fit']['amplitude_covered'])}/"
           f"{len(d['fit']['amplitude_covered'])}")
-    for w in d["warnings"]:
+    for w in fit.diagnostics.warnings:
         print("warning:", w)
-    if not d["warnings"]:
+    if not fit.diagnostics.warnings:
         print("no warning")"""),
     new_markdown_cell("""## 1. Van der Pol oscillator (Section 4.1)
 
@@ -139,10 +124,10 @@ $\\dot r = (\\mu-\\mu_0) r - r^3 - \\kappa r^5$ with $\\kappa \\ge 0$ (prior hal
 1/Δμ), so the data can bend the law but need not. (The subcritical gauge, $a_4 = -1$ with $a_2$ free,
 reaches the square-root law only as $a_2 \\to -\\infty$; a prior there held the orbits to a bent law
 that the map made up for with a μ-dependent tilt, and the fitted orbits were tilted ellipses.)"""),
-    new_code_cell("""rs_v, truth_v = vanderpol_experiment(seed=0, fast=FAST)
-clean, _ = vanderpol_experiment(seed=0, noise=0.0, fast=FAST)
-feats = extract_harmonics(clean, n_harmonics=settings.n_harmonics,
-                          segment_periods=settings.segment_periods)
+    new_code_cell("""rs_v, truth_v = bh.simulators.truth.vanderpol_experiment(seed=0, fast=FAST)
+clean, _ = bh.simulators.truth.vanderpol_experiment(seed=0, noise=0.0, fast=FAST)
+feats = bh.features.extract_harmonics(clean, n_harmonics=settings.n_harmonics,
+                                      segment_periods=settings.segment_periods)
 exact = np.array([truth_v.exact_amplitude(r.mu, r.branch) for r in clean])
 rows = ["| μ | true peak-to-peak of z1 | K-harmonic reconstruction | difference |",
         "|---:|---:|---:|---:|"]
@@ -151,22 +136,23 @@ for m, e, a in zip(feats.mu, exact, feats.amplitude, strict=True):
 display(Markdown("\\n".join(rows)))
 print(f"K = {feats.n_harmonics} harmonics; Hopf point (Jacobian): mu0 = {truth_v.mu0:.2e}; "
       f"offsets {truth_v.offsets}")"""),
-    new_code_cell("""result_v = fit_hybrid(rs_v, "supercritical", seed=0, settings=settings, progress=False)
-print("seconds per stage:", {k: round(v, 1) for k, v in result_v.timings.items()})
-show_diagnostics(result_v)
-interval_table(result_v, truth_v)
-a4_v = result_v.interval("a4")
+    new_code_cell("""fit_v = bh.fit(rs_v, settings, criticality="supercritical", seed=0, progress=False)
+print("seconds per stage:", {k: round(v, 1) for k, v in fit_v.timings.items()})
+show_diagnostics(fit_v)
+interval_table(fit_v, truth_v)
+a4_v = fit_v.interval("a4")
 print(f"a4 = {a4_v.median:.4f} [{a4_v.lo:.4f}, {a4_v.hi:.4f}]: the quintic term in the "
       "supercritical gauge a2 = -1 (its scale is set by the learnt map; no true value)")"""),
-    new_code_cell("""rows_v = held_out_check(result_v, truth_v)
+    new_code_cell("""rows_v = bh.simulators.truth.held_out_check(fit_v, truth_v)
 held_out_table(rows_v, "no unit")
-display(plot_diagram_vs_truth(result_v, truth_v, rows_v,
-                              title="Van der Pol: posterior against the continuation"))"""),
+display(bh.plotting.truth.plot_diagram_vs_truth(fit_v, truth_v, rows_v,
+                                                title="Van der Pol: posterior against the continuation"))"""),
     new_markdown_cell("""The phase portraits of the training recordings (grey), with 60 posterior orbit draws and their
 pointwise median, and the true orbit (dashed). Then the same at the held-out μ, from fresh
 recordings the fit never saw."""),
-    new_code_cell("""display(plot_phase_portraits(result_v, rs_v, truth=truth_v.orbit))
-display(plot_phase_portraits(result_v, held_out_recordings(truth_v), truth=truth_v.orbit))"""),
+    new_code_cell("""display(bh.plotting.plot_phase_portraits(fit_v, rs_v, truth=truth_v.orbit))
+display(bh.plotting.plot_phase_portraits(fit_v, bh.simulators.truth.held_out_recordings(truth_v),
+                                         truth=truth_v.orbit))"""),
     new_markdown_cell("""**Why the map varies with μ to second order.** μ0 is an extrapolation from the smallest
 training μ, 0.05, to zero amplitude, and the LCOs alone do not pin it: they lie on
 $|u|^2 = \\mu - \\mu_0$ (at κ = 0), so a map whose gain changes with μ trades against a shift of μ0.
@@ -196,9 +182,9 @@ of the orbit centres lies outside that orbit. The collapsed core's features need
 the orbits: they are the time-Fourier coefficients of each channel in a common affine frame
 (`bayeshopf.features.harmonics`, no polar angle), phase-aligned at the crest of the first channel's
 fundamental, with standard errors from the spread over segments of five periods."""),
-    new_code_cell("""rs_f, truth_f = flutter_experiment(seed=0, fast=FAST)
-feats_f = extract_harmonics(rs_f, n_harmonics=settings.n_harmonics,
-                            segment_periods=settings.segment_periods)
+    new_code_cell("""rs_f, truth_f = bh.simulators.truth.flutter_experiment(seed=0, fast=FAST)
+feats_f = bh.features.extract_harmonics(rs_f, n_harmonics=settings.n_harmonics,
+                                        segment_periods=settings.segment_periods)
 rows = ["| recording | μ (m/s) | branch | heave p-p (mm) | true (mm) | frequency (Hz) | segments |",
         "|---|---:|---|---:|---:|---:|---:|"]
 for i, r in enumerate(rs_f):
@@ -209,56 +195,42 @@ display(Markdown("\\n".join(rows)))
 print("truth:", {k: round(v, 4) for k, v in truth_f.values().items()}, "offsets:",
       {k: round(v, 5) for k, v in truth_f.offsets.items()})
 print("common centre of the frame:", feats_f.frame.centre.round(5))"""),
-    new_code_cell("""result_f = fit_hybrid(rs_f, "subcritical", seed=0, settings=settings, progress=False)
-print("seconds per stage:", {k: round(v, 1) for k, v in result_f.timings.items()})
-show_diagnostics(result_f)
-interval_table(result_f, truth_f)
-m = result_f.map_point.params
+    new_code_cell("""fit_f = bh.fit(rs_f, settings, criticality="subcritical", seed=0, progress=False)
+print("seconds per stage:", {k: round(v, 1) for k, v in fit_f.timings.items()})
+show_diagnostics(fit_f)
+interval_table(fit_f, truth_f)
+m = fit_f.map_point.params
 print(f"MAP: mu0 = {float(m['mu0']):.4f}, mu_fold = {float(m['mu_fold']):.4f}")
-if result_f.spec.unfolding == "curved":
-    a2, w = result_f.interval("a2"), result_f.interval("w_unfold")
+if fit_f.spec.unfolding == "curved":
+    a2, w = fit_f.interval("a2"), fit_f.interval("w_unfold")
     print(f"a2 = {a2.median:.3f} [{a2.lo:.3f}, {a2.hi:.3f}], w = {w.median:.2f} [{w.lo:.2f}, "
           f"{w.hi:.2f}]: the cubic coefficient of the curved unfolding, not the linear one's "
           f"2 sqrt(mu0 - mu_SN) = {truth_f.a2:.3f}")"""),
-    new_code_cell("""rows_f = held_out_check(result_f, truth_f)
+    new_code_cell("""rows_f = bh.simulators.truth.held_out_check(fit_f, truth_f)
 held_out_table(rows_f, "m")
-display(plot_diagram_vs_truth(result_f, truth_f, rows_f,
-                              title="3-DOF aerofoil: posterior against the continuation"))"""),
-    new_code_cell("""display(plot_phase_portraits(result_f, rs_f, truth=truth_f.orbit))
-display(plot_phase_portraits(result_f, held_out_recordings(truth_f), truth=truth_f.orbit))"""),
+display(bh.plotting.truth.plot_diagram_vs_truth(fit_f, truth_f, rows_f,
+                                                title="3-DOF aerofoil: posterior against the continuation"))"""),
+    new_code_cell("""display(bh.plotting.plot_phase_portraits(fit_f, rs_f, truth=truth_f.orbit))
+display(bh.plotting.plot_phase_portraits(fit_f, bh.simulators.truth.held_out_recordings(truth_f),
+                                         truth=truth_f.orbit))"""),
     new_markdown_cell("""The posterior predictive check of the training recordings: each measured amplitude against its
 90 % predictive interval, and the phase-aligned time-Fourier coefficients of both channels (the
 data the model is fitted to) against theirs, standardised."""),
-    new_code_cell("""display(plot_ppc(result_f.ppc(), amplitude_units="m", amplitude_label="peak-to-peak of h"))"""),
+    new_code_cell("""display(fit_f.plot.ppc())"""),
     new_markdown_cell("""## 3. Are the intervals calibrated?
 
 One fit says little about calibration. `benchmarks/bench_calibration_collapsed.py` repeats the
 aerofoil experiment with 20 noise seeds (100–119: new noise, phases and sensor offsets each time, the
 same μ plan, default settings, none chosen on these seeds) and counts how often the 90 % intervals
 contain the truth, and compares their widths with the spread of the posterior medians across seeds
-(an interval much wider than that spread is right for the wrong reason). Its stored results, from
-`benchmarks/calibration_collapsed/` (a2 is not compared: under the curved unfolding it has no true
-value):"""),
-    new_code_cell("""folder = Path.cwd().parent / "benchmarks" / "calibration_collapsed"
-recs = [json.loads(p.read_text()) for p in sorted(folder.glob("seed_*.json"))]
-recs = [r for r in recs if not r["short"]]
-if recs:
-    rows = ["| quantity | coverage | median width | sd of medians | width / (3.29 sd) | bias |",
-            "|---|---:|---:|---:|---:|---:|"]
-    for q in ("mu0", "mu_fold"):
-        inside = sum(r[q]["inside"] for r in recs)
-        width = np.median([r[q]["hi"] - r[q]["lo"] for r in recs])
-        sd = np.std([r[q]["median"] for r in recs], ddof=1)
-        bias = np.mean([r[q]["median"] - r[q]["true"] for r in recs])
-        rows.append(f"| {q} | {inside}/{len(recs)} ({100 * inside / len(recs):.0f}%) "
-                    f"| {width:.4f} | {sd:.4f} | {width / (3.29 * sd):.2f} | {bias:+.4f} |")
-    display(Markdown("\\n".join(rows)))
-    ho = [h["inside"] for r in recs for h in r["held_out"]]
-    print(f"{len(recs)} seeds ({recs[0]['seed']}-{recs[-1]['seed']}); held-out orbits inside their "
-          f"90% predictive intervals: {sum(ho)}/{len(ho)}; NUTS converged in "
-          f"{sum(r['converged'] for r in recs)}/{len(recs)}")
+(an interval much wider than that spread is right for the wrong reason). Its summary, as stored in
+`benchmarks/calibration_collapsed.md` (a2 is not compared: under the curved unfolding it has no
+true value):"""),
+    new_code_cell("""table = Path.cwd().parent / "benchmarks" / "calibration_collapsed.md"
+if table.is_file():
+    display(Markdown(table.read_text().split("\\n", 1)[1]))   # without its title
 else:
-    print("run benchmarks/bench_calibration_collapsed.py first")"""),
+    print("benchmarks/calibration_collapsed.md is in the repository; run this notebook from notebooks/")"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={

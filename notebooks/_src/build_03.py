@@ -15,7 +15,7 @@ airspeed μ as the bifurcation parameter. They reported a Hopf point at **17.67 
 **14.66 m/s**, and admitted that their fit overfits: the diagram wiggles between recordings and the
 fold moves a lot when one recording is left out.
 
-This notebook fits the Bayesian hybrid model on the collapsed core (`bayeshopf.posterior.fit_hybrid`):
+This notebook fits the Bayesian hybrid model with `bh.fit`, as `bayeshopf fit` does:
 1. the recordings and their harmonic features,
 2. the fit: μ0, a2 and μ_SN with 90% intervals next to the paper's values, the convergence
    diagnostics, each orbit's error, the bifurcation diagram and the phase portraits,
@@ -26,7 +26,7 @@ This notebook fits the Bayesian hybrid model on the collapsed core (`bayeshopf.p
 
 The recordings are the authors' MIT-licensed files (Kyounghyunlee/ML_Hopf), read from the folder
 named by `BAYESHOPF_FLUTTER_CBC` (or `../shared/data/flutter_cbc`) if it exists, else downloaded once
-(11 MB, SHA-256 checked) by `bayeshopf.datasets.flutter_cbc(download=True)`. Set `BAYESHOPF_FAST=1`
+(11 MB, SHA-256 checked) by `bh.read_recordings("flutter_cbc", download=True)`. Set `BAYESHOPF_FAST=1`
 before starting the kernel for a quick run (short chains, two leave-one-out folds)."""),
     new_code_cell("""%matplotlib inline
 import os
@@ -38,30 +38,20 @@ from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-configure_xla_cpu()  # before any JAX work, as the CLI does
-
 import numpy as np
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
-from bayeshopf.datasets import flutter_cbc
-from bayeshopf.diagnostics.comparison import coexisting_orbits
-from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
-from bayeshopf.features.harmonics import extract_harmonics
-from bayeshopf.inference.channels import fit_channel
-from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.plotting import diagram_grid, plot_bifurcation, plot_phase_portraits
-from bayeshopf.plotting.channels import plot_channel
-from bayeshopf.plotting.pair_invariant import plot_pair_invariant
-from bayeshopf.plotting.timeseries import plot_frequency, plot_time_series
-from bayeshopf.plotting.validation import plot_leave_one_out
-from bayeshopf.posterior import fit_hybrid
-from bayeshopf.validation import leave_one_out
+# the modules below are loaded here so that bh.<package>.<module> reaches them
+import bayeshopf.diagnostics.comparison
+import bayeshopf.diagnostics.pair_invariant
+import bayeshopf.inference.channels
+import bayeshopf.plotting.channels
+import bayeshopf.plotting.pair_invariant
+import bayeshopf.plotting.validation
 
 DATA = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc")))
-settings = CollapsedSettings.fast() if FAST else CollapsedSettings()   # the defaults for the full run
+settings = bh.Settings.fast() if FAST else bh.Settings()   # the defaults for the full run
 print(f"bayeshopf {bh.__version__}; fast mode: {FAST}")"""),
     new_markdown_cell("""## 1. The recordings
 
@@ -71,8 +61,8 @@ airspeed comes from `Wind_sped`, the branch from the file name. The unstable rec
 orbit is aligned in phase and expanded in K = 4 harmonics per channel in a common planar frame, and
 the mean and standard error over the segments enter the likelihood. The whole record is used, not
 the paper's 1.2 s."""),
-    new_code_cell("""rs = flutter_cbc(DATA) if DATA.is_dir() else flutter_cbc(download=True)  # no local copy: downloaded once
-feats = extract_harmonics(rs, n_harmonics=settings.n_harmonics, segment_periods=settings.segment_periods)
+    new_code_cell("""rs = bh.read_recordings(DATA) if DATA.is_dir() else bh.read_recordings("flutter_cbc", download=True)  # no local copy: downloaded once
+feats = bh.features.extract_harmonics(rs, n_harmonics=settings.n_harmonics, segment_periods=settings.segment_periods)
 rows = ["| recording | μ (m/s) | branch | segments | heave p-p (mm) | frequency (Hz) |",
         "|---|---:|---|---:|---:|---:|"]
 for i, r in enumerate(rs):
@@ -87,26 +77,27 @@ only a *subcritical* Hopf bifurcation has an unstable LCO branch, so the model i
 recordings say so without any model too: at 14.9 and at 16.5 m/s there are two orbits of very
 different size, each repeatable over its segments, and a supercritical Hopf bifurcation has one LCO
 per airspeed:"""),
-    new_code_cell("""for p in coexisting_orbits(feats):
+    new_code_cell("""for p in bh.diagnostics.comparison.coexisting_orbits(feats):
     a, b = p["amplitudes"]
     print(f"{p['mu']:g} m/s: {p['recordings'][0]} {1e3 * a:.1f} mm and {p['recordings'][1]} "
           f"{1e3 * b:.1f} mm, {p['separation']:.0f} segment spreads apart")"""),
-    new_markdown_cell("""`fit_hybrid(rs, "subcritical")` at its default settings: a deterministic start and the MAP
+    new_markdown_cell("""`bh.fit(rs, criticality="subcritical")` at its default settings: a deterministic start and the MAP
 (L-BFGS), then NUTS (4 chains × 500 draws) on the few nonlinear parameters with the map's linear
 coefficients integrated out, and one exact draw of the map per posterior draw. The posterior medians
 and 90% intervals, next to the paper's point estimates:"""),
-    new_code_cell("""post = fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
+    new_code_cell("""fit = bh.fit(rs, settings, criticality="subcritical", seed=0, progress=False)
 paper = {"mu0": 17.67, "mu_fold": 14.66}
 rows = ["| | median | 90% interval | paper |", "|---|---:|---|---:|"]
 for name in ("mu0", "a2", "mu_fold"):
-    iv = post.interval(name)
+    iv = fit.interval(name)
     rows.append(f"| {name} | {iv.median:.2f} | [{iv.lo:.2f}, {iv.hi:.2f}] | {paper.get(name, '–')} |")
 display(Markdown("\\n".join(rows)))
-print("seconds per stage: " + ", ".join(f"{k} {v:.0f}" for k, v in post.timings.items()))"""),
+print("seconds per stage: " + ", ".join(f"{k} {v:.0f}" for k, v in fit.timings.items()))"""),
     new_markdown_cell("""**Convergence.** The MAP's gradient norm, and per site NUTS's R̂ and bulk ESS (ArviZ) against
 the thresholds, and the divergent transitions. Any failed check, of convergence or of the fit, is
-listed as a warning (in fast mode the short chains fail the ESS threshold)."""),
-    new_code_cell("""d = post.diagnostics
+listed as a warning (in fast mode the short chains fail the ESS threshold): `fit.diagnostics`
+gives each check's status and the warnings, `fit.diagnostics.details` the numbers."""),
+    new_code_cell("""d = fit.diagnostics.details
 m, p = d["map"], d["posterior"]
 print(f"MAP: gradient norm {m['grad_norm']:.2g} after {m['steps']} L-BFGS steps "
       f"(tolerance {m['tolerance']:g}): {'converged' if m['converged'] else 'NOT converged'}")
@@ -115,15 +106,15 @@ for name, s in p["sites"].items():
     rows.append(f"| {name} | {s['r_hat']:.3f} | {s['ess_bulk']:.0f} | {'yes' if s['ok'] else 'no'} |")
 display(Markdown("\\n".join(rows)))
 print(f"{p['chains']} chains, {p['divergences']} divergent transitions")
-print("warnings:" + "".join(f"\\n  - {w}" for w in d["warnings"]) if d["warnings"] else "warnings: none")"""),
+print(fit.diagnostics)"""),
     new_markdown_cell("""**Orbit error.** Each recording's posterior-median orbit against its measured mean orbit: the RMS
 distance over the orbit relative to the orbit's RMS radius, and the segments' own spread on the same
 scale. The bar is 5%, or twice the spread."""),
     new_code_cell("""rows = ["| recording | orbit error | segment spread | within the bar |", "|---|---:|---:|---|"]
-for e in post.orbit_error():
+for e in fit.orbit_error():
     rows.append(f"| {e['name']} | {100 * e['relative']:.1f}% | {100 * e['spread']:.1f}% | {'yes' if e['ok'] else 'no'} |")
 display(Markdown("\\n".join(rows)))
-ppc = post.ppc()
+ppc = fit.ppc()
 print(f"{int(ppc.covered.sum())}/{ppc.covered.size} training amplitudes inside their 90% predictive bands")"""),
     new_markdown_cell("""**The controller's residual.** CBC holds each orbit with a feedback force. Its search nulls one
 scalar measure of that force's fundamental, not the fundamental itself, and the rig records the
@@ -131,25 +122,23 @@ actuator command (the rig description's `control` channel). Its fundamental `U` 
 input of the model: the pitch axis `w2` of each orbit, relative to the heave, moves by `H U` with a
 complex gain `H` integrated out with the map (`docs/validation.md`, "The CBC controller's
 residual"). The gain, and the size of `H U` against each recording's fundamental of `w2`:"""),
-    new_code_cell("""g = post.control_gain()
+    new_code_cell("""g = fit.control_gain()
 for part in ("re", "im"):
     iv = g["gain"][part]
     print(f"H, {part}: {iv['median']:.0f} [{iv['ci90'][0]:.0f}, {iv['ci90'][1]:.0f}] {g['units']}")
 rows = ["| recording | control fundamental (mV) | response / fundamental of w2 |", "|---|---:|---:|"]
-for name, u in zip(post.features.names, post.features.control):
+for name, u in zip(fit.features.names, fit.features.control):
     rows.append(f"| {name} | {1e3 * np.hypot(*u):.2f} | {100 * g['response'][name]:.1f}% |")
 display(Markdown("\\n".join(rows)))"""),
     new_markdown_cell("""The diagram: posterior median, 50% and 90% bands of both branches, and (dotted) the 90% band
 of a new measurement, which includes the model error away from the recordings."""),
-    new_code_cell("""fig = plot_bifurcation(post.diagram(diagram_grid(post)), ppc, mu_label="airspeed",
-                       mu_units="m/s", amplitude_units="m", amplitude_label="heave peak-to-peak")
-display(fig)"""),
+    new_code_cell("""display(fit.plot.bifurcation())"""),
     new_markdown_cell("""The phase portraits: 60 posterior orbits over each measured one."""),
-    new_code_cell("""fig = plot_phase_portraits(post, rs)
-display(fig)"""),
+    new_code_cell("""display(bh.plotting.plot_phase_portraits(fit, rs))"""),
     new_markdown_cell("""## 3. Leave-one-out: is the fit robust?
 
-Each recording is held out in turn and the model refitted on the other six (`bayeshopf.validation`).
+Each recording is held out in turn and the model refitted on the other six
+(`bh.validation.leave_one_out`).
 Two predictions per fold, both from that fold's fit:
 * **Bayesian**: posterior median and the 90% band of a new measurement (the posterior predictive,
   with the held-out recording's own standard errors and the model error away from the recordings);
@@ -162,8 +151,8 @@ that calibrated 90% bands hold this few held-out recordings or fewer (binomial, 
 independent). The figure is the paper's Fig. exp_val with bands; the star is the held-out recording
 (filled when inside the Bayesian 90% band). The last panel shows the fold of every fold."""),
     new_code_cell("""folds = rs.names[2:4] if FAST else None
-loo = leave_one_out(feats, "subcritical", seed=0, settings=settings, folds=folds, keep_fits=True,
-                    progress=False)
+loo = bh.validation.leave_one_out(feats, "subcritical", seed=0, settings=settings, folds=folds,
+                                  keep_fits=True, progress=False)
 rows = ["| method | held-out inside 90% | P(this few or fewer), calibrated bands | mean held-out error | max error | sd of μ_SN over folds | μ_SN range |",
         "|---|---:|---:|---:|---:|---:|---|"]
 for s in loo.summary().values():
@@ -182,8 +171,7 @@ for r in loo.table():
                 f"{b['mu_fold']['median']:.2f} [{b['mu_fold']['ci90'][0]:.2f}, {b['mu_fold']['ci90'][1]:.2f}] | "
                 f"{b['mu0']['median']:.2f} [{b['mu0']['ci90'][0]:.2f}, {b['mu0']['ci90'][1]:.2f}] |")
 display(Markdown("\\n".join(rows)))
-fig = plot_leave_one_out(loo, feats)
-display(fig)"""),
+display(bh.plotting.validation.plot_leave_one_out(loo, feats))"""),
     new_markdown_cell("""### A check without any map: the stable/unstable pairs
 
 Where both LCOs of the normal form `ṙ = β(μ) r + a2 r³ − r⁵` exist, `r_s² + r_u² = a2` and
@@ -194,18 +182,19 @@ interpolated between 15.6 and 16.5 m/s). With the paper's unfolding `β = μ −
 line in μ: the line through all three pairs gives μ0, a2 and the fold, and the dashed lines each
 leave one pair out and predict it (open markers). The fit uses a curved unfolding `β(μ)` (one more
 parameter, `w`), drawn in blue from its posterior."""),
-    new_code_cell("""pairs = pair_invariants(feats)
-line = invariant_line(pairs)
+    new_code_cell("""pairs = bh.diagnostics.pair_invariant.pair_invariants(feats)
+line = bh.diagnostics.pair_invariant.invariant_line(pairs)
 rows = ["| | map-free line (three pairs) | hybrid fit |", "|---|---|---|"]
 for name in ("mu0", "a2", "mu_fold"):
-    a, b = line.interval(name), post.interval(name)
+    a, b = line.interval(name), fit.interval(name)
     rows.append(f"| {name} | {a.median:.2f} [{a.lo:.2f}, {a.hi:.2f}] | {b.median:.2f} [{b.lo:.2f}, {b.hi:.2f}] |")
 for k, held in enumerate(pairs):
-    pred = invariant_line([p for i, p in enumerate(pairs) if i != k]).unstable_amplitude(held.mu, held.stable_amplitude)
+    others = [p for i, p in enumerate(pairs) if i != k]
+    pred = bh.diagnostics.pair_invariant.invariant_line(others).unstable_amplitude(held.mu, held.stable_amplitude)
     rows.append(f"| without unstable {held.mu:g} m/s | {1e3 * pred.median:.1f} [{1e3 * pred.lo:.1f}, {1e3 * pred.hi:.1f}] mm "
                 f"| measured {1e3 * held.unstable_amplitude:.1f} mm |")
 display(Markdown("\\n".join(rows)))
-display(plot_pair_invariant(pairs, fit=post))"""),
+display(bh.plotting.pair_invariant.plot_pair_invariant(pairs, fit=fit))"""),
     new_markdown_cell("""The measured `x` falls faster towards the Hopf point than a straight line: from the pairs at 14.9
 and 15.7 m/s the straight line predicts too large an unstable orbit at 16.5 m/s, with or without a
 map. The curved unfolding bends through the pairs instead, which is why the fit's μ0 lies below the
@@ -218,13 +207,12 @@ normal-form phase φ), and the actuator command is regressed on the fitted plana
 (`b = [1, μ̃, w1, w2, μ̃w1, μ̃w2, w1², w1w2, w2², w1³, w2³]`): the channel's and the basis' Fourier
 coefficients in φ, fitted across recordings by a conjugate Bayesian regression and repeated over
 posterior draws of the fit. The bands carry both uncertainties."""),
-    new_code_cell("""channel = fit_channel(post, rs, "actuator", n_draws=40 if FAST else 100)
-amp = np.array([np.nanquantile(channel.amplitude(post, [m], "unstable" if u else "stable", predictive=True)[:, 0],
+    new_code_cell("""channel = bh.inference.channels.fit_channel(fit, rs, "actuator", n_draws=40 if FAST else 100)
+amp = np.array([np.nanquantile(channel.amplitude(fit, [m], "unstable" if u else "stable", predictive=True)[:, 0],
                                [0.05, 0.95]) for m, u in zip(feats.mu, feats.unstable, strict=True)])
 inside = (channel.measured_amplitude >= amp[:, 0]) & (channel.measured_amplitude <= amp[:, 1])
 print(f"actuator peak-to-peak inside its 90% band for {inside.sum()}/{inside.size} recordings")
-fig = plot_channel(channel, post)
-display(fig)"""),
+display(bh.plotting.channels.plot_channel(channel, fit))"""),
     new_markdown_cell("""## 5. How fast the oscillations run: frequency and time series
 
 By the rotational symmetry of the normal form the phase speed depends on r and μ only, so each
@@ -234,7 +222,7 @@ like the map's and a model error σ_ω. Two bands for the frequency: the **curve
 posterior) and the **predictive** band of a new recording (adding σ_ω and the recording's standard
 error)."""),
     new_code_cell("""rows = ["| recording | μ (m/s) | measured (Hz) | predictive median [90%] (Hz) | inside |", "|---|---:|---:|---|---|"]
-check = post.frequency_check()
+check = fit.frequency_check()
 for e, mu in zip(check, feats.mu, strict=True):
     p = e["predicted"]
     rows.append(f"| {e['name']} | {mu:g} | {e['measured_hz']:.4f} | {p['median']:.4f} [{p['ci90'][0]:.4f}, {p['ci90'][1]:.4f}] | "
@@ -244,13 +232,9 @@ print(f"{sum(e['inside_ci90'] for e in check)}/{len(check)} measured frequencies
     new_markdown_cell("""The frequency against airspeed (curve bands shaded, a new recording's band dotted, the
 recordings as markers), and the paper's Fig. ts_exp with bands: the first periods of each record,
 each predicted orbit traversed at its own frequency from the recording's phase at its first sample."""),
-    new_code_cell("""grid = diagram_grid(post)
-bands = [post.frequency_band(grid, b) for b in ("stable", "unstable")]
-pred = [post.frequency_band(grid, b, predictive=True) for b in ("stable", "unstable")]
-meas = [(m, hz, "unstable" if u else "stable") for m, hz, u in zip(feats.mu, feats.frequency_hz, feats.unstable, strict=True)]
-display(plot_frequency(bands, meas, predictive=pred, mu_label="airspeed", mu_units="m/s"))
-ts = post.time_series_bands(rs, n_periods=3.0)
-display(plot_time_series([ts[i] for i in (0, 3, 4, 6)], mu_label="airspeed", mu_units="m/s"))"""),
+    new_code_cell("""display(fit.plot.frequency())
+ts = fit.time_series_bands(rs, n_periods=3.0)
+display(bh.plotting.plot_time_series([ts[i] for i in (0, 3, 4, 6)], mu_label="airspeed", mu_units="m/s"))"""),
 ]
 
 nb = new_notebook(cells=cells, metadata={

@@ -13,7 +13,7 @@ A test engineer has a simulator of the rig (here the 3-DOF aerofoil `flutter3dof
 of its limit cycles, stable and unstable (by control-based continuation). The simulator's
 bifurcation diagram does not match. That can mean two different things: its parameters (stiffness,
 damping, aerodynamic coefficients) are a few percent off, or it lacks a piece of physics.
-`bayeshopf.discrepancy.analyse` keeps them apart:
+`bh.discrepancy.analyse` keeps them apart:
 
 1. **compares** the recordings with the simulator's periodic orbits at the same airspeeds and
    branches (frequency and Fourier coefficients of every observed channel, sensor offsets
@@ -44,22 +44,12 @@ from pathlib import Path
 
 warnings.filterwarnings("ignore", message="IProgress not found")
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-configure_xla_cpu()  # before any JAX work and before SciPy's OpenBLAS loads, as the CLI does
-
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
 from IPython.display import Markdown, display
 
-from bayeshopf.discrepancy import analyse, simulate_with_effect
-from bayeshopf.discrepancy.effects import truth_points
-from bayeshopf.plotting.discrepancy import plot_discrepancy_diagram, plot_orbit_residuals
-from bayeshopf.simulators import get_system
+import bayeshopf as bh
+import bayeshopf.plotting.discrepancy  # loads bh.plotting.discrepancy (the analysis' figures)
 
-flutter = get_system("flutter3dof")
+flutter = bh.simulators.get_system("flutter3dof")
 PLAN = [(15.5, "stable"), (16.0, "stable"), (16.5, "stable"), (17.0, "stable"),
         (15.5, "unstable"), (16.0, "unstable"), (16.5, "unstable"), (17.0, "unstable")]
 MU, BRANCH = [m for m, _ in PLAN], [b for _, b in PLAN]
@@ -75,15 +65,15 @@ offsets. The truth is kept apart in `TRUTH` and used only to score the answer.""
     new_code_cell("""FACTORS = {"k_h": 1.04, "c0": 1.03, "c_alpha": 0.95}
 aerofoil = flutter.with_params(**{k: f * flutter.params[k] for k, f in FACTORS.items()})
 aerofoil = aerofoil.replace(default_plan=tuple(PLAN))
-rs, truth = simulate_with_effect(aerofoil, "alpha_quadratic_damping", 0.05, MU, BRANCH, seed=2, **KW)
+rs, truth = bh.discrepancy.simulate_with_effect(aerofoil, "alpha_quadratic_damping", 0.05, MU, BRANCH, seed=2, **KW)
 TRUTH = {"params": {k: f * flutter.params[k] for k, f in FACTORS.items()}, **truth,
-         **truth_points(aerofoil, "alpha_quadratic_damping", 0.05)}
+         **bh.discrepancy.effects.truth_points(aerofoil, "alpha_quadratic_damping", 0.05)}
 print(len(rs), "recordings:", ", ".join(r.name for r in rs))"""),
     new_markdown_cell("""## 2. The blind analysis
 
 Only the recordings and the plain simulator go in. With `hybrid=True` the Bayesian hybrid fit of
-the recordings is run too (`bayeshopf.posterior.fit_hybrid`, subcritical, at the default
-`CollapsedSettings`: four NUTS chains; a minute or two), for Hopf and fold intervals that assume no
+the recordings is run too (`bh.fit`, subcritical, at the default `bh.Settings`: four NUTS
+chains; a minute or two), for Hopf and fold intervals that assume no
 simulator at all. The report records its settings and its convergence under `"hybrid"`."""),
     new_code_cell("""def show(d):
     print(d["verdict"]["sentence"])
@@ -115,14 +105,15 @@ simulator at all. The report records its settings and its convergence under `"hy
           f"converged: {c['ok']}; {len(h['warnings'])} warning(s)")
 
 
-report = analyse(rs, flutter, seed=0, hybrid=not FAST, point_intervals=not FAST)
+report = bh.discrepancy.analyse(rs, flutter, seed=0, hybrid=not FAST, point_intervals=not FAST)
 d = report.to_json()
 show(d)"""),
     new_markdown_cell("""Every planted change is found: the three parameters and the term, nothing else. The hybrid fit,
 which knows no simulator, is another matter: its Hopf point 17.194 [17.188, 17.203] m/s lies just
-above the truth's 17.177 and its fold 14.143 [13.995, 14.252] m/s below the truth's 14.272, both
+above the truth's 17.177 and its fold 14.142 [13.992, 14.252] m/s below the truth's 14.272, both
 outside their 90% intervals, with converged chains and no warning. The unstable recordings stop at
-17.0 m/s and none lies near the fold, so both are extrapolations of the normal form (README, Limits).
+17.0 m/s and none lies near the fold, so both are extrapolations of the normal form
+(`docs/limits.md`).
 
 ### Scored against the truth
 
@@ -151,25 +142,23 @@ The bifurcation diagram of the nominal simulator, the calibrated one and the cal
 named term, with the recordings; then the residual along the orbit of every recording and channel
 (measured minus simulated, sensor offsets removed) before and after, with Â±2 standard errors in
 grey."""),
-    new_code_cell("""display(plot_discrepancy_diagram(report))
-display(plot_orbit_residuals(report))"""),
+    new_code_cell("""display(bh.plotting.discrepancy.plot_discrepancy_diagram(report))
+display(bh.plotting.discrepancy.plot_orbit_residuals(report))"""),
     new_markdown_cell("""## 4. The other answers
 
 With the nominal simulator's own recordings the verdict must be `none`. With its parameters off
 and nothing missing it must be `parameters off`, naming no term. A lagged aerodynamic pitch moment
 (`delayed_aero`, a linear effect with its own state) is outside the library; what the analysis
 makes of it is printed as it comes (fast mode: the first case only)."""),
-    new_code_cell("""from bayeshopf.simulators import simulate_recordings
-
-rs0 = simulate_recordings(flutter, MU, BRANCH, seed=3, **KW)
-print("no effect:", analyse(rs0, flutter, hybrid=False).to_json()["verdict"]["sentence"])
+    new_code_cell("""rs0 = bh.simulate(flutter, MU, BRANCH, seed=3, **KW)
+print("no effect:", bh.discrepancy.analyse(rs0, flutter, hybrid=False).to_json()["verdict"]["sentence"])
 if not FAST:
-    rs1 = simulate_recordings(aerofoil, MU, BRANCH, seed=5, **KW)
+    rs1 = bh.simulate(aerofoil, MU, BRANCH, seed=5, **KW)
     print("\\nparameters off only (k_h +4%, c0 +3%, c_alpha -5%):",
-          analyse(rs1, flutter, hybrid=False).to_json()["verdict"]["sentence"])
-    rs2, _ = simulate_with_effect(flutter, "delayed_aero", 1.0, MU, BRANCH, seed=4, **KW)
+          bh.discrepancy.analyse(rs1, flutter, hybrid=False).to_json()["verdict"]["sentence"])
+    rs2, _ = bh.discrepancy.simulate_with_effect(flutter, "delayed_aero", 1.0, MU, BRANCH, seed=4, **KW)
     print("\\ndelayed_aero (parameters nominal):",
-          analyse(rs2, flutter, hybrid=False).to_json()["verdict"]["sentence"])"""),
+          bh.discrepancy.analyse(rs2, flutter, hybrid=False).to_json()["verdict"]["sentence"])"""),
     new_markdown_cell("""What these runs show (20 s records):
 
 * **Nothing planted:** `none`.
@@ -188,18 +177,16 @@ if not FAST:
 
 The 7 CBC recordings of the real rig against the `flutter3dof` simulator, the default analysis (it
 takes about ten minutes). There is **no ground truth**: what it finds is a hypothesis to test on the
-rig, not a discovery. The hybrid fit of the rig runs at the default `CollapsedSettings`, as
+rig, not a discovery. The hybrid fit of the rig runs at the default `bh.Settings`, as
 `bayeshopf fit` does. Skipped in fast mode; without a local copy of the recordings they are
 downloaded once."""),
     new_code_cell("""DATA = Path(os.environ.get("BAYESHOPF_FLUTTER_CBC", str(Path.cwd().parent / ".." / "shared" / "data" / "flutter_cbc")))
 if not FAST:
-    from bayeshopf.datasets import flutter_cbc
-
-    rig = flutter_cbc(DATA) if DATA.is_dir() else flutter_cbc(download=True)  # no local copy: downloaded once
-    real = analyse(rig, flutter, seed=0, hybrid=True)
+    rig = bh.read_recordings(DATA) if DATA.is_dir() else bh.read_recordings("flutter_cbc", download=True)  # no local copy: downloaded once
+    real = bh.discrepancy.analyse(rig, flutter, seed=0, hybrid=True)
     show(real.to_json())
     display(Markdown(real.to_markdown()))
-    display(plot_discrepancy_diagram(real))
+    display(bh.plotting.discrepancy.plot_discrepancy_diagram(real))
 else:
     print("skipped (fast mode)")"""),
     new_markdown_cell("""The same verdict and numbers as `bayeshopf discrepancy` on these recordings
@@ -208,8 +195,8 @@ five parameters off, two of them (the quadratic and cubic pitch stiffness) by âˆ
 damping that falls and then rises with the velocity amplitude is the missing pair. A 2.8% model
 error remains, and the calibrated simulator has no orbit at the two 14.9 m/s recordings (its fold
 is at 15.34 m/s). The hybrid fit is the one of `bayeshopf fit`, with the CBC controller's residual
-as an input (Hopf point 16.91 [16.81, 17.10] m/s, fold 14.26 [13.81, 14.52] m/s, `docs/validation.md`);
-it warns that its relative model error, 3.3%, is above 2%."""),
+as an input (in this run Hopf point 16.91 [16.82, 17.08] m/s, fold 14.25 [13.84, 14.51] m/s;
+`docs/validation.md`); it warns that its relative model error, 3.2%, is above 2%."""),
 ]
 
 nb = new_notebook(cells=cells, metadata={

@@ -16,7 +16,7 @@ cells = [
     new_markdown_cell("""# Which measurement next: a sequential CBC campaign on the simulator
 
 A CBC experiment is slow: each unstable orbit takes minutes of wind-tunnel time to hold and record.
-After a first few recordings, `bayeshopf next` (or `bayeshopf.design.next_measurements`) says where
+After a first few recordings, `bayeshopf next` (or `bh.next_measurements`) says where
 the next one is expected to shrink the interval of a target most: here the **fold** μ_SN, where the
 stable and unstable branches meet and below which the rig cannot flutter.
 
@@ -25,7 +25,7 @@ This notebook walks through a campaign on the 3-DOF aerofoil simulator (`flutter
 periodic orbits), where the truth is known:
 
 1. start from 2 stable and 2 unstable recordings, far from the fold, and fit them;
-2. ask `next_measurements` for the best (μ, branch); show the table and the figure;
+2. ask `bh.next_measurements` for the best (μ, branch); show the table and the figure;
 3. "measure" there (simulate the recording the rig would give, with 1 % noise and sensor offsets);
 4. refit with the new recording, and repeat.
 
@@ -42,32 +42,24 @@ import warnings
 
 warnings.filterwarnings("ignore", message="IProgress not found")  # tqdm without ipywidgets
 
-from bayeshopf.inference.cache import configure_xla_cpu
-
-configure_xla_cpu()  # before any JAX work and before SciPy's OpenBLAS loads, as the CLI does
-
 from IPython.display import Markdown, display
 
 import bayeshopf as bh
-from bayeshopf.data.recording import RecordingSet
-from bayeshopf.design import next_measurements
-from bayeshopf.inference.collapsed import CollapsedSettings
-from bayeshopf.plotting.design import plot_design
-from bayeshopf.plotting.truth import plot_diagram_vs_truth
-from bayeshopf.posterior import fit_hybrid
-from bayeshopf.simulators import SimulationError, simulate_recordings
-from bayeshopf.simulators.truth import flutter_experiment
+# the modules below are loaded here so that bh.<package>.<module> reaches them
+import bayeshopf.plotting.design
+import bayeshopf.plotting.truth
+import bayeshopf.simulators.truth
 
 START = ((16.0, "stable"), (17.4, "stable"), (16.4, "unstable"), (17.4, "unstable"))
 STEPS = 1 if FAST else 4
 SEED = 42   # the noise, phases and offsets of this campaign (not a seed of the benchmark)
-settings = CollapsedSettings.fast() if FAST else CollapsedSettings()   # the defaults of `bayeshopf fit`
+settings = bh.Settings.fast() if FAST else bh.Settings()   # the defaults of `bayeshopf fit`
 print(f"bayeshopf {bh.__version__}; fast mode: {FAST}")"""),
     new_markdown_cell("""## 1. The first four recordings
 
 Two stable and two CBC-held unstable orbits between 16 and 17.4 m/s: well above the fold, so the
 fold is an extrapolation and its interval is wide."""),
-    new_code_cell("""rs, truth = flutter_experiment(seed=SEED, fast=FAST, plan=START, held_out=())
+    new_code_cell("""rs, truth = bh.simulators.truth.flutter_experiment(seed=SEED, fast=FAST, plan=START, held_out=())
 print(f"true fold {truth.mu_fold:.4f} m/s, true Hopf point {truth.mu0:.4f} m/s")
 for r in rs:
     print(f"  {r.name}: {r.mu:g} m/s, {r.branch}")
@@ -82,7 +74,7 @@ def record_state(fit, added):
           f"(width {fold.hi - fold.lo:.3f}, truth {'inside' if fold.contains(truth.mu_fold) else 'OUTSIDE'}); "
           f"Hopf {hopf.median:.3f} [{hopf.lo:.3f}, {hopf.hi:.3f}] m/s")
 
-fit = fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
+fit = bh.fit(rs, settings, criticality="subcritical", seed=0, progress=False)
 record_state(fit, "start (2 stable + 2 unstable)")"""),
     new_markdown_cell("""## 2. Ask where to measure, measure there, refit
 
@@ -108,22 +100,22 @@ differs slightly from the fit's interval printed after each refit (from all the 
 
 recs = list(rs)
 for step in range(1, STEPS + 1):
-    d = next_measurements(fit, target="fold", n=3, seed=step)
+    d = bh.next_measurements(fit, target="fold", n=3, seed=step)
     print(f"step {step}: where to measure next")
     show(d)
-    display(plot_design(d, fit))
+    display(bh.plotting.design.plot_design(d, fit))
     best = d.recommended[0]
     try:
-        new = simulate_recordings(truth.system, [best.mu], [best.branch], noise=truth.noise,
-                                  offsets=truth.offsets, duration_s=truth.duration_s,
-                                  sample_rate_hz=truth.sample_rate_hz, seed=1000 + step,
-                                  diagram=truth.diagram)[0]
-    except SimulationError as err:   # CBC would not find the orbit either: the point is lost
+        new = bh.simulate(truth.system, [best.mu], [best.branch], noise=truth.noise,
+                          offsets=truth.offsets, duration_s=truth.duration_s,
+                          sample_rate_hz=truth.sample_rate_hz, seed=1000 + step,
+                          diagram=truth.diagram)[0]
+    except bh.simulators.SimulationError as err:   # CBC would not find the orbit either: the point is lost
         print(f"  no {best.branch} orbit at {best.mu:.2f} m/s: {err}")
         continue
     recs.append(new)
-    rs_now = RecordingSet(tuple(recs), rs.planar, rs.mu_label, rs.mu_units)
-    fit = fit_hybrid(rs_now, "subcritical", seed=0, settings=settings, progress=False)
+    rs_now = bh.RecordingSet(tuple(recs), rs.planar, rs.mu_label, rs.mu_units)
+    fit = bh.fit(rs_now, settings, criticality="subcritical", seed=0, progress=False)
     record_state(fit, f"{best.branch} at {best.mu:.2f} m/s")"""),
     new_markdown_cell("""## 3. The campaign
 
@@ -137,19 +129,17 @@ for h in history:
     rows.append(f"| {h['recordings']} | {h['added']} | {f[0]:.3f} [{f[1]:.3f}, {f[2]:.3f}] | {f[2] - f[1]:.3f} | "
                 f"{o[0]:.3f} [{o[1]:.3f}, {o[2]:.3f}] | {o[2] - o[1]:.3f} |")
 display(Markdown("\\n".join(rows) + f"\\n\\nTruth: fold {truth.mu_fold:.4f} m/s, Hopf point {truth.mu0:.4f} m/s."))
-display(plot_diagram_vs_truth(fit, truth, title="after the campaign: posterior against the continuation"))"""),
+display(bh.plotting.truth.plot_diagram_vs_truth(fit, truth, title="after the campaign: posterior against the continuation"))"""),
     new_markdown_cell("""**When the recommended orbit is not there.** Candidates are ranked by the current fit. When
 that fit's fold is off, the best candidate can lie below the true fold, where the orbit does not
 exist: the simulator raises, as CBC would find nothing. The attempt costs a recording and adds
 nothing, and the unchanged fit recommends the same point again; `next` does not learn from a failed
-attempt. In the stored run (seed 42, re-executed at stop 47) this happens after the sixth recording:
-its fold interval [14.265, 14.924] m/s ends just below the true 14.936 m/s, and the recommended
-14.87 m/s has no orbit on either branch. An experimenter would move to the next candidate above the
-failed μ (15.07 m/s in the table). The campaign stored at 656de2b added an unstable orbit at
-15.25 m/s at step 2 instead and found the fold; the fits have changed since then (the same
-campaign at the start of stop 47, before its changes, ran as stored here). The ten campaigns of
-`benchmarks/design_s47.md` (seeds 100–109, re-run on stop 47's code) lost no recording this way;
-seed 42 is a counterexample (README, Limits)."""),
+attempt. In the stored run this happens after the sixth recording: its fold interval
+[14.265, 14.924] m/s ends just below the true 14.936 m/s, and the recommended 14.87 m/s has no
+orbit on either branch. An experimenter would move to the next candidate above the failed μ. The
+same campaign run without JAX's CPU settings (fits that differ in the last digits) found every
+orbit; the ten campaigns of `benchmarks/design.md` (seeds 100–109) lost no recording this way
+(`docs/limits.md`, "Which measurement next")."""),
     new_markdown_cell("""On the command line the same step is one call on a saved fit:
 
 ```bash

@@ -1,0 +1,178 @@
+"""Convergence and fit checks of a fitted hybrid model, one warning line per failed check.
+
+:func:`diagnose` reads a :class:`~bayeshopf.hybrid_posterior.HybridPosterior`
+(its MAP point, its posterior run, its predictive check and orbit errors) and
+returns the record kept as its ``diagnostics``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.diagnostics.summaries import CI, interval
+from bayeshopf.inference import nuts, optimum, svi
+from bayeshopf.model import collapsed as cm
+
+#: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
+ORBIT_ERROR_MAX = 0.05
+#: ... or this many times its measured segment spread.
+ORBIT_SPREAD_FACTOR = 2.0
+#: Model error σ_c above this many times the median measured standard error of
+#: the channel's leading coefficients is reported as "the scatter is large
+#: against the measured spread".
+SIGMA_RATIO_MAX = 10.0
+#: ... when it is also above this fraction of the orbit scale ρ (a model error of
+#: 0.2% of the orbit is no misfit worth a warning, however clean the data).
+SIGMA_ORBIT_FRACTION = 0.01
+#: Relative model error above which the fit is reported as missing the orbits'
+#: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
+#: harmonic).
+SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
+
+
+def orbit_error_parts(model, data) -> np.ndarray:
+    r"""The RMS distance between two orbits, split into the centre and each harmonic.
+
+    For orbits given by their coefficients ``[a_0, a_1..a_K, b_1..b_K]`` on each
+    axis, shape ``(2, 2K+1)``, Parseval's identity over one period gives the
+    mean squared distance as
+
+    .. math::  \overline{|Δz(φ)|^2} = \sum_{axes} \Big[Δa_0^2
+               + \tfrac12 \sum_{k=1}^{K} (Δa_k^2 + Δb_k^2)\Big],
+
+    so the parts ``e_0 = (Σ Δa_0²)^{1/2}`` and ``e_k = (½ Σ (Δa_k² + Δb_k²))^{1/2}``
+    have squares that add up to the squared RMS distance.
+
+    Returns:
+        ``(e_0, e_1, …, e_K)``, in the coefficients' units.
+    """
+    d = np.asarray(model, float) - np.asarray(data, float)
+    K = (d.shape[-1] - 1) // 2
+    parts = [np.sum(d[:, 0] ** 2)]
+    parts += [0.5 * np.sum(d[:, k] ** 2 + d[:, K + k] ** 2) for k in range(1, K + 1)]
+    return np.sqrt(np.array(parts))
+
+
+def harmonic_name(k: int) -> str:
+    """``"the centre"``, ``"the fundamental"``, ``"harmonic k"``."""
+    return {0: "the centre", 1: "the fundamental"}.get(k, f"harmonic {k}")
+
+
+def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
+    """Convergence and fit checks of ``post``, with one warning line per failed check.
+
+    ``post``: a :class:`~bayeshopf.hybrid_posterior.HybridPosterior`.
+
+    * ``map``: gradient norm at the MAP and whether it is below the tolerance.
+    * ``posterior``: NUTS R̂ and bulk ESS of μ0, a2, the fold (and ``w``) with
+      the thresholds, divergences; SVI: the ELBO-plateau test.
+    * ``fit``: each recording's orbit error (``orbit_error``), whether its
+      amplitude lies in its 90% predictive band, and each channel's model error
+      σ against the measured standard errors; with the frequency model, whether
+      each measured frequency lies in its 90% predictive band.
+    """
+    warnings = []
+    mp = post.map_point
+    d = {"map": {"grad_norm": mp.grad_norm, "converged": mp.converged, "steps": mp.n_steps,
+                 "polish_evaluations": mp.polish_evaluations, "tolerance": optimum.MAP_GTOL}}
+    if not mp.converged:
+        warnings.append(f"MAP: gradient norm {mp.grad_norm:.2g} after {mp.n_steps} L-BFGS steps "
+                        f"and {mp.polish_evaluations} of the root find "
+                        f"(tolerance {optimum.MAP_GTOL:g})")
+    run = post.run
+    if run.method == "nuts":
+        conv = nuts.convergence(run.chains)
+        d["posterior"] = {"method": "nuts", "chains": int(next(iter(run.chains.values())).shape[0]),
+                          "divergences": run.divergences, "r_hat_max": nuts.RHAT_MAX,
+                          "ess_min": nuts.ESS_MIN, "sites": conv, **run.sampler}
+        for k, v in conv.items():
+            if not v["ok"]:
+                warnings.append(f"NUTS: {k} has R̂ {v['r_hat']:.3f} and bulk ESS "
+                                f"{v['ess_bulk']:.0f} (need R̂ ≤ {nuts.RHAT_MAX}, "
+                                f"ESS ≥ {nuts.ESS_MIN}) "
+                                f"after {run.sampler.get('draws_per_chain', '?')} draws per chain "
+                                f"(max_samples {post.settings.max_samples})")
+        if run.divergences:
+            warnings.append(f"NUTS: {run.divergences} divergent transitions")
+    else:
+        pl = svi.elbo_plateau(run.losses)
+        d["posterior"] = {"method": "svi", "elbo_plateau": pl, "steps": int(run.losses.size)}
+        if not pl["plateau"]:
+            warnings.append(f"SVI: the −ELBO still falls ({pl['drop']:.3g} over the last 10% of "
+                            f"the steps, ±{pl['se']:.2g})")
+    ppc = ppc or post.ppc()
+    errs = post.orbit_error()
+    covered = ppc.covered
+    sigma = np.median(np.asarray(post.samples["sigma"]), axis=0)
+    se = np.median(post.features.coeffs_se[:, :, [1, 1 + post.spec.n_harmonics]], axis=(0, 2))
+    ratio = sigma / se
+    d["fit"] = {
+        "orbit_error": errs,
+        "amplitude_covered": [bool(c) for c in covered],
+        "sigma": sigma.tolist(), "sigma_over_measured_se": ratio.tolist(),
+        "sigma_over_orbit_scale": (sigma / post.spec.orbit_scale).tolist(),
+        "sigma_rel": float(np.median(post.samples["sigma_rel"])),
+    }
+    if post.spec.has_discrepancy:
+        total = np.hypot(np.asarray(post.samples["eta"]), np.asarray(post.samples["sigma_rel"]))
+        d["fit"]["discrepancy"] = {
+            "eta": post.interval("eta").to_json(), "ell": post.interval("ell").to_json(),
+            "sigma_rel": post.interval("sigma_rel").to_json(),
+            "relative": interval(total).to_json()}
+        d["fit"]["sigma_rel"] = float(np.median(total))
+    if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
+                                        or not post.spec.has_discrepancy):
+        d["fit"]["extrapolation_scale"] = {
+            "scale": post.extrapolation_scale,
+            "chosen_by": ("setting" if post.settings.extrapolation_scale is not None
+                          else "relative model error"),
+            "p_above_limit": post.p_misfit,
+            "sigma_rel_ci90": [float(q) for q in np.quantile(
+                np.asarray(post.samples["sigma_rel"]), [0.5 - CI / 2, 0.5 + CI / 2])]}
+    for e in errs:
+        if not e["ok"]:
+            rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
+            spread = "n/a" if e["spread"] is None else f"{100 * e['spread']:.1f}%"
+            where = ""
+            if e["by_harmonic"] is not None:
+                parts = e["by_harmonic"]
+                k = int(np.argmax(parts))
+                where = f"; the largest part in {harmonic_name(k)}, {100 * parts[k]:.1f}%"
+            warnings.append(f"fit: {e['name']}: orbit error {rel} of its size (limit "
+                            f"{100 * ORBIT_ERROR_MAX:.0f}% or {ORBIT_SPREAD_FACTOR:g}× its "
+                            f"segment spread {spread}){where}")
+    for name, c in zip(post.features.names, covered, strict=True):
+        if not c:
+            warnings.append(f"fit: {name}: measured amplitude outside its 90% predictive band")
+    for ch, r, sg in zip(post.spec.frame.names, ratio, sigma, strict=True):
+        if r > SIGMA_RATIO_MAX and sg > SIGMA_ORBIT_FRACTION * post.spec.orbit_scale:
+            warnings.append(f"fit: model error of {ch} is {r:.0f}× its measured standard error: "
+                            "the map does not fit the orbits, the bands are wide for that reason")
+    if post.has_frequency:
+        d["fit"]["frequency"] = post.frequency_check()
+        for e in d["fit"]["frequency"]:
+            if not e["inside_ci90"]:
+                warnings.append(f"fit: {e['name']}: measured frequency {e['measured_hz']:.4g} Hz "
+                                "outside its 90% predictive band")
+    rel = d["fit"]["sigma_rel"]
+    if rel > SIGMA_REL_MAX and post.spec.has_discrepancy:
+        warnings.append(
+            f"fit: relative model error {100 * rel:.1f}% (limit {100 * SIGMA_REL_MAX:.0f}%): "
+            "the model misses the orbits by that fraction; the model discrepancy carries it "
+            "into the Hopf and fold intervals and the bands, which may still be too narrow "
+            "(check them by leave-one-out: bayeshopf.validation.leave_one_out)")
+    elif rel > SIGMA_REL_MAX:
+        warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
+                        f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
+                        "fraction, and the predictive bands are that wide for that reason; "
+                        + (f"bands of new measurements away from the recordings use the "
+                           f"wider model-error scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such "
+                           f"fits in the {100 * post.p_misfit:.0f}% of the draws above the "
+                           "limit, and may still be too narrow"
+                           if post.settings.extrapolation_scale is None else
+                           "bands of new measurements away from the recordings are not "
+                           "calibrated for such a fit")
+                        + " (check them by leave-one-out: bayeshopf.validation.leave_one_out)")
+    d["warnings"] = warnings
+    return d

@@ -1,0 +1,234 @@
+r"""The least-squares problem of a calibration: stacked residuals, Jacobian, minimiser.
+
+**Coordinates.** Uncertain parameter :math:`j` is written through its
+standard normal coordinate :math:`z_j` (:meth:`UncertainParameter.value`:
+:math:`\theta_j = \theta_{0j} e^{\sigma_j z_j}` or :math:`\theta_{0j}(1 + s_j z_j)`),
+and the term's coefficient as :math:`c = s_k\zeta` with the library's prior
+scale :math:`s_k`, so every unknown :math:`x = (z, \zeta)` has a standard normal
+prior (half-normal for a freeplay gap, :math:`\zeta \ge 0`).
+
+**Residuals.** With the whitened feature residuals :math:`e(x)` of
+:class:`~bayeshopf.discrepancy.select.Fitter` (sensor offsets profiled out,
+orbits re-shot at every :math:`x` by homotopy from the nearest point already
+solved, an orbit lost when it no longer exists or changes its Floquet
+stability), the negative log posterior is half the squared norm of the
+stacked vector
+
+.. math::  E(x) = \begin{bmatrix} e(x) \\ x \end{bmatrix}, \qquad
+           -\log p(x \mid y) = \tfrac12 \lVert E(x)\rVert^2 + \text{const},
+
+the prior rows :math:`x` being the standard normal priors. The mode is found by
+:func:`scipy.optimize.least_squares` (trust-region Gauss–Newton, a bound
+:math:`\zeta \ge 0` for a gap), with the Jacobian :math:`G = \partial E/\partial x`
+by forward differences of re-shot orbits (steps a tenth of the current
+posterior standard deviation, as in :mod:`~bayeshopf.discrepancy.select`);
+rows of orbits lost at either end of a difference are zero.
+
+**Recorded orbits must exist.** An orbit that the simulator has at the start
+
+**Recorded orbits must exist.** An orbit that the simulator has at the start
+of a fit (the nominal parameters) but loses at a trial point (its fold moved
+past the recording's μ, or it changed its Floquet stability) gives every one
+of its features the whitened residual :data:`BARRIER`: a recorded orbit exists,
+so a model without it has (practically) zero likelihood, and the trust region
+rejects the step. :mod:`~bayeshopf.discrepancy.select` instead charges a lost
+orbit a finite :math:`\chi^2` per feature (``LOST_CHI2``); from far away, where
+the misfit per feature is larger than that, losing an orbit is cheaper than
+fitting it, and the minimiser stalls on that discontinuity. An orbit already
+missing at the start keeps the finite charge.
+
+**The linearisation checked** (:func:`polish`). The Laplace evidence
+(:mod:`~bayeshopf.discrepancy.evidence`) credits the step to the mode of the
+linear model at a fit's end point; the orbits re-shot there must agree.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import optimize
+
+from bayeshopf.discrepancy.evidence import _at_tau, laplace_evidence
+from bayeshopf.discrepancy.orbits import OrbitBatch, track
+from bayeshopf.discrepancy.select import Fitter
+from bayeshopf.discrepancy.terms import Term
+from bayeshopf.simulators.base import UncertainParameter
+
+__all__ = ["BARRIER", "MAX_NFEV", "TOL", "Problem", "minimise", "polish"]
+
+#: Largest number of residual evaluations of one least-squares fit.
+MAX_NFEV = 40
+#: ``ftol``, ``xtol`` and ``gtol`` of the least-squares fits: a change of the log
+#: posterior below ~1e-5 is far below anything the evidence resolves.
+TOL = 1e-6
+#: Whitened residual of every feature of a recorded orbit that a trial point loses.
+BARRIER = 1e5
+
+
+class Problem:
+    """Stacked whitened residuals :math:`E(x)` and their forward-difference Jacobian.
+
+    Orbits are memoised by ``x``; a new ``x`` is reached by homotopy
+    (:func:`~bayeshopf.discrepancy.orbits.track`) from the solved point with the
+    fewest lost orbits, nearest in ``x``.
+    """
+
+    def __init__(self, fitter: Fitter, unc: Sequence[UncertainParameter],
+                 term: Term | Sequence[Term] | None,
+                 seeds: Sequence[tuple[np.ndarray, OrbitBatch]], *,
+                 known: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+                 h0: np.ndarray | None = None):
+        self.terms = (() if term is None else (term,) if isinstance(term, Term)
+                      else tuple(term))
+        self.fitter, self.unc = fitter, tuple(unc)
+        self.term = self.terms[0] if len(self.terms) == 1 else None
+        self.d = len(self.unc)
+        self.n = self.d + len(self.terms)
+        self.nominal = np.array([fitter.params0[u.name] for u in self.unc])
+        self.memo: list[tuple[np.ndarray, OrbitBatch, np.ndarray]] = []
+        # the orbits found at the start must stay found: a recorded orbit exists
+        self.must = np.logical_or.reduce([ob.ok for _, ob in seeds])
+        for x, ob in seeds:
+            self._store(np.asarray(x, float), ob)
+        self.h = np.full(self.n, 1e-3) if h0 is None else np.asarray(h0, float).copy()
+        self.n_track = 0
+        # data rows of Jacobian columns already known at some points (the calibration's)
+        self.known = list(known)
+        self.last: tuple[np.ndarray, np.ndarray] | None = None
+        self.first: tuple[np.ndarray, np.ndarray] | None = None
+
+    def params(self, x: np.ndarray) -> dict:
+        """The simulator's parameters at ``x = (z, ζ...)``."""
+        p = dict(self.fitter.params0)
+        for j, u in enumerate(self.unc):
+            p[u.name] = float(u.value(x[j], self.nominal[j]))
+        for k, t in enumerate(self.terms):
+            p[t.param] = float(t.scale * x[self.d + k])
+        return p
+
+    def _E(self, x: np.ndarray, ob: OrbitBatch) -> np.ndarray:
+        e = self.fitter.residuals(ob)
+        e[self.must & ~ob.ok] = BARRIER
+        return np.concatenate([e.ravel(), x])
+
+    def _store(self, x, ob) -> np.ndarray:
+        E = self._E(x, ob)
+        self.memo.append((x.copy(), ob, E))
+        if len(self.memo) > 48:
+            del self.memo[1]                                  # keep the seed
+        return E
+
+    def _track(self, x_from, ob_from, x_to) -> OrbitBatch:
+        self.n_track += 1
+        return track(self.fitter.system, self.params(x_from), self.params(x_to), ob_from,
+                     self.fitter.stable)
+
+    def solve(self, x: np.ndarray) -> tuple[OrbitBatch, np.ndarray]:
+        """The orbits and stacked residuals :math:`E(x)` (memoised)."""
+        x = np.asarray(x, float)
+        for xm, ob, E in self.memo:
+            if np.array_equal(xm, x):
+                return ob, E
+        xm, ob, _ = min(self.memo, key=lambda m: (-int(m[1].ok.sum()),
+                                                  float(np.sum((m[0] - x) ** 2))))
+        ob_new = self._track(xm, ob, x)
+        return ob_new, self._store(x, ob_new)
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """:math:`E(x)`, for :func:`scipy.optimize.least_squares`."""
+        return self.solve(x)[1]
+
+    def jacobian(self, x: np.ndarray, *_) -> np.ndarray:
+        r""":math:`G = \partial E/\partial x` by forward differences (prior rows exact).
+
+        Columns known at ``x`` (``known``) are reused; the steps become a tenth of
+        the posterior standard deviations that ``G`` gives.
+        """
+        x = np.asarray(x, float)
+        if self.last is not None and np.array_equal(self.last[0], x):
+            return self.last[1].copy()
+        ob, E = self.solve(x)
+        R, P = self.fitter.mf.y.shape
+        G = np.zeros((E.size, self.n))
+        kn = next((J for xk, J in self.known if np.array_equal(xk[: J.shape[1]], x[: J.shape[1]])
+                   and not np.any(x[J.shape[1]:])), None)
+        for j in range(self.n):
+            if kn is not None and j < kn.shape[1]:
+                G[: R * P, j] = kn[:, j]
+                continue
+            h = self.h[j]
+            xj = x.copy()
+            xj[j] += h
+            ob_j = self._track(x, ob, xj)
+            col = (self._E(xj, ob_j) - E) / h
+            bad = ~(ob.ok & ob_j.ok)
+            col[: R * P].reshape(R, P)[bad] = 0.0
+            G[:, j] = col
+        G[R * P:] = np.eye(self.n)                             # the prior rows, exactly
+        H = G.T @ G
+        sd = np.sqrt(np.clip(np.diag(np.linalg.inv(H)), 0.0, None))
+        self.h = np.clip(0.1 * sd, 1e-5, 1e-2)
+        self.last = (x.copy(), G.copy())
+        if self.first is None:
+            self.first = self.last
+        return G
+
+
+def minimise(prob: Problem, x0: np.ndarray, max_nfev: int):
+    """The mode from ``x0``: :func:`scipy.optimize.least_squares` (``trf``, ζ ≥ 0 for a gap).
+
+    Returns:
+        ``(x, orbits, E, G, result)`` at the point found.
+    """
+    lower = np.full(prob.n, -np.inf)
+    for k, t in enumerate(prob.terms):
+        if t.positive:
+            lower[prob.d + k] = 0.0
+    res = optimize.least_squares(prob.residual, x0, jac=prob.jacobian, bounds=(lower, np.inf),
+                                 method="trf", x_scale=1.0, ftol=TOL, xtol=TOL, gtol=TOL,
+                                 max_nfev=max_nfev)
+    x = res.x
+    ob, E = prob.solve(x)
+    return x, ob, E, prob.jacobian(x), res
+
+
+
+def polish(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray,
+            tau: float):
+    r"""Check the linearisation behind the evidence at a fit's end point, and act on it.
+
+    The Laplace evidence credits the step :math:`\delta` to the mode of the linear
+    model at ``x`` (the :math:`b^\top H^{-1} b` term). That credit is earned only if
+    the orbits re-shot at :math:`x + \delta` agree: where the fit stopped short of
+    its mode on a non-smooth or strongly curved posterior (a freeplay gap), the
+    linear model can promise a misfit thousands of times lower than the one
+    re-shot. The step is taken (once) when it lowers the re-shot misfit, and the
+    disagreement that remains, :math:`\tfrac12\max(0, \chi^2_{\rm shot} -
+    \chi^2_{\rm linear})` at ``tau``, is returned to be charged to the evidence.
+
+    Returns:
+        ``(x, ob, E, G, penalty)`` at the point kept.
+    """
+    fitter = prob.fitter
+    lower = np.full(prob.n, -np.inf)
+    for k, t in enumerate(prob.terms):
+        if t.positive:
+            lower[prob.d + k] = 0.0
+    penalty = 0.0
+    for it in range(2):
+        Et, Gt = _at_tau(fitter, E, G, ob.ok, tau)
+        _, delta, _ = laplace_evidence(Et, Gt)
+        xl = np.maximum(x + delta, lower)
+        step = xl - x
+        pred = float(np.sum((Et + Gt @ step) ** 2))
+        ob_l, E_l = prob.solve(xl)
+        El_t, _ = _at_tau(fitter, E_l, np.zeros((E_l.size, 0)), ob_l.ok, tau)
+        shot = float(El_t @ El_t)
+        penalty = 0.5 * max(0.0, shot - pred)
+        if it == 0 and shot < float(Et @ Et):
+            x, ob, E = xl, ob_l, E_l
+            G = prob.jacobian(xl)
+            continue
+        break
+    return x, ob, E, G, penalty

@@ -1,0 +1,550 @@
+"""The fitted hybrid model: its record and what it predicts.
+
+A :class:`HybridPosterior` holds the posterior draws of the normal form and the
+hyperparameters, one exact draw of the map per draw, the convergence
+diagnostics, and methods for orbits, amplitudes, the bifurcation diagram, the
+posterior predictive check and each recording's orbit error, all through the
+one prediction path (:mod:`bayeshopf.predictive`).
+:func:`~bayeshopf.posterior.fit_hybrid` builds it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from bayeshopf.data.recording import RecordingSet
+from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand
+from bayeshopf.diagnostics.bifurcation import BranchBand, DiagramBands, quantiles
+from bayeshopf.diagnostics.bifurcation import levels as band_levels
+from bayeshopf.diagnostics.fit_checks import (
+    ORBIT_ERROR_MAX,
+    ORBIT_SPREAD_FACTOR,
+    orbit_error_parts,
+)
+from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.diagnostics.summaries import CI, Interval, interval
+from bayeshopf.errors import FitError
+from bayeshopf.features.harmonics import HarmonicFeatures, reconstruct, time_design
+from bayeshopf.inference import collapsed as ci
+from bayeshopf.model import collapsed as cm
+from bayeshopf.model import normal_form
+from bayeshopf.model.normal_form import branch_sign
+from bayeshopf.predictive import (
+    N_BAND_DRAWS,
+    _common_over_mu,
+    amplitude_of,
+    default_extrapolation_scale,
+    discrepancy_draws,
+    draw_indices,
+    extrapolation_factor,
+    frequency_draws,
+    noise_sd,
+    orbit_coefficients,
+    rms_scale,
+    scale_orbits,
+)
+
+#: Phases per predicted orbit.
+N_PHI = 64
+
+
+@dataclass(frozen=True)
+class HybridPosterior:
+    """A fitted Bayesian hybrid model on the collapsed core (immutable).
+
+    Attributes:
+        spec: Structure and data constants of the model.
+        features: The training features.
+        map_point: The MAP stage.
+        run: The posterior stage (draws, map draws, diagnostics inputs).
+        settings: Settings used.
+        seed: Seed used.
+        mu_label: Name of μ.
+        mu_units: Unit of μ.
+        amplitude_units: Unit of the amplitude (z1's).
+        timings: Seconds per stage.
+        diagnostics: Convergence and fit checks
+            (:func:`~bayeshopf.diagnostics.fit_checks.diagnose`).
+    """
+
+    spec: cm.CollapsedSpec
+    features: HarmonicFeatures
+    map_point: ci.MapPoint
+    run: ci.PosteriorRun
+    settings: ci.CollapsedSettings
+    seed: int
+    mu_label: str
+    mu_units: str
+    amplitude_units: str
+    timings: dict = field(default_factory=dict, compare=False)
+    diagnostics: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def criticality(self) -> str:
+        """``"subcritical"`` or ``"supercritical"``."""
+        return self.spec.criticality
+
+    @property
+    def samples(self) -> dict:
+        """Posterior draws of every site, chains pooled."""
+        return self.run.samples
+
+    @property
+    def theta(self) -> dict:
+        """Draws of the nonlinear parameters the map and orbits need."""
+        return {k: v for k, v in self.samples.items() if not k.startswith("marginal")}
+
+    def extrapolation_scales(self, n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
+        """The scale ``S`` of the model error away from the recordings, per draw.
+
+        For the draws :meth:`orbit_coefficients` uses with ``n_draws``:
+        ``settings.extrapolation_scale`` when it is set (a user's override);
+        otherwise 0 for a model with the discrepancy, whose Gaussian process
+        already widens the bands away from the recordings, and for one without
+        it chosen by each draw's relative model error
+        (:func:`default_extrapolation_scale`).
+        """
+        idx = self._draw_indices(n_draws)
+        s = self.settings.extrapolation_scale
+        if s is not None or self.spec.has_discrepancy:
+            return np.full(len(idx), 0.0 if s is None else float(s))
+        return default_extrapolation_scale(np.asarray(self.samples["sigma_rel"])[idx])
+
+    @property
+    def extrapolation_scale(self) -> float:
+        """The rms of :meth:`extrapolation_scales` over all draws (:func:`rms_scale`).
+
+        The setting when it is set (see :meth:`extrapolation_scales` otherwise).
+        """
+        return rms_scale(self.extrapolation_scales(None))
+
+    @property
+    def p_misfit(self) -> float:
+        """The posterior probability that the relative model error σ_rel is above its 2% limit."""
+        return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
+
+    def interval(self, name: str, mass: float = 0.9) -> Interval | None:
+        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
+        if name not in self.samples:
+            return None
+        return interval(self.samples[name], mass)
+
+    # ----------------------------------------------------------------- orbits
+    def _draw_indices(self, n: int | None) -> np.ndarray:
+        return draw_indices(self.run.betas.shape[0], n)
+
+    def orbit_coefficients(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
+                           control=None):
+        """Harmonic coefficients of the predicted orbits in the frame, ``(n, n_mu, 2, 2K+1)``.
+
+        The model orbit at μ, projected on the K harmonics the data have, plus,
+        with the model discrepancy, a draw of the discrepancy there
+        (:func:`discrepancy_draws`: the rig's orbit, not the normal form's
+        alone; ``nan`` where the branch does not exist in a draw); with ``control``
+        ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
+        that control, else the uncontrolled system's.
+        """
+        idx = self._draw_indices(n_draws)
+        theta = {k: v[idx] for k, v in self.theta.items()}
+        c = orbit_coefficients(self.spec, theta, self.run.betas[idx], mu, branch_sign(branch),
+                               control=control)
+        if not self.spec.has_discrepancy:
+            return c
+        return c + self._discrepancy(mu, branch, n_draws)[0]
+
+    @cached_property
+    def _discrepancy_memo(self) -> dict:
+        return {}
+
+    def _discrepancy(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
+        """:func:`discrepancy_draws` at μ for the draws of ``n_draws``, once per μ and branch.
+
+        A prediction needs both its parts (the draw for the orbit, the
+        independent variance for the noise); they come from one computation.
+        """
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        key = (mu.tobytes(), branch, n_draws)
+        memo = self._discrepancy_memo
+        if key not in memo:
+            if len(memo) >= 64:
+                memo.clear()
+            idx = self._draw_indices(n_draws)
+            memo[key] = discrepancy_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                          self.run.betas[idx], self.features, mu,
+                                          branch_sign(branch), self.seed)
+        return memo[key]
+
+    def recording_control(self, i: int):
+        """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""
+        if self.spec.control_scale is None or self.features.control is None:
+            return None
+        return np.asarray(self.features.control)[i][None]
+
+    def _noise_sd(self, coeffs, coeffs_se=None, mu=None, branch: str = "stable"):
+        """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``.
+
+        With the discrepancy, its independent part ``σ_rel g`` at ``mu`` (the
+        μ of ``coeffs``' second axis, or of a training recording for ``coeffs``
+        of one μ) replaces ``σ_rel c``.
+        """
+        idx = self._draw_indices(N_BAND_DRAWS)
+        se = np.median(self.features.coeffs_se, axis=0) if coeffs_se is None else coeffs_se
+        sigma = np.asarray(self.samples["sigma"])[idx]
+        if not self.spec.has_discrepancy:
+            return noise_sd(coeffs, sigma, np.asarray(self.samples["sigma_rel"])[idx], se)
+        nugget = self._discrepancy(mu, branch)[1].reshape(np.shape(coeffs))
+        extra = (1,) * (np.ndim(coeffs) - 3)
+        s2 = sigma.reshape((-1,) + extra + (2, 1)) ** 2
+        return np.sqrt(np.asarray(se) ** 2 + s2 + nugget)
+
+    def orbits(self, mu: float, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
+               control=None):
+        """Predicted orbits in physical units at one μ, ``(n, N_PHI, 2)``.
+
+        ``control`` ``(1, 2)``: a recording's control fundamental
+        (:meth:`recording_control`), for the orbit as it was held.
+        """
+        c = self.orbit_coefficients([mu], branch, n_draws, control=control)[:, 0]
+        phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
+        return self.spec.frame.from_frame(reconstruct(c, phi))
+
+    def _amplitude_of(self, coeffs):
+        return amplitude_of(self.spec, coeffs)
+
+    def amplitude(self, mu, branch: str = "stable", predictive: bool = False,
+                  coeffs_se=None, control=None) -> np.ndarray:
+        """Amplitude draws (peak-to-peak of z1) at μ, ``(n, n_mu)``; ``nan`` where no LCO.
+
+        ``predictive=True`` gives a new recording's amplitude: the model's
+        coefficients plus Gaussian noise with the model error σ and the
+        standard error ``coeffs_se`` (by default the training recordings'
+        median), one set of standard normals per draw for every μ, so that each
+        μ's column is that μ's prediction alone and a band over μ is smooth.
+        ``control`` ``(n_mu, 2)``: a new recording's measured control
+        fundamental (:meth:`orbit_coefficients`).
+        """
+        c = self.orbit_coefficients(mu, branch, control=control)
+        if predictive:
+            c = self._away_from_data(c, mu, branch)
+            rng = np.random.default_rng(self.seed)
+            c = c + self._noise_sd(c, coeffs_se, mu, branch) * _common_over_mu(rng, c.shape)
+        return self._amplitude_of(c)
+
+    def _away_from_data(self, coeffs, mu, branch: str) -> np.ndarray:
+        """Predicted orbits with the model error away from the recordings (when enabled).
+
+        :func:`extrapolation_factor` from this branch's training μ; zero at them.
+        """
+        if not self.settings.extrapolation:
+            return coeffs
+        f = self.features
+        mu_data = f.mu[f.unstable == (branch == "unstable")]
+        n = np.shape(coeffs)[0]
+        return scale_orbits(coeffs, extrapolation_factor(
+            mu, mu_data, self.spec.mu_span, n, self.seed, scale=self.extrapolation_scales(n)))
+
+    def control_gain(self, ci: float = CI) -> dict | None:
+        """The orbits' response to the control's fundamental, or ``None`` without the term.
+
+        ``gain``: the median and ``ci`` interval of the real and imaginary parts
+        of ``H``, the response of the second frame axis ``w2`` (frame units per
+        unit of the control channel; :mod:`bayeshopf.model.collapsed`, "Control");
+        ``prior_sd``: their prior sd; ``response``: per recording, the median of
+        ``|H U_i|`` relative to the measured fundamental of ``w2``. Where ``U`` is
+        nearly proportional to the orbit, as on the wind-tunnel rig, that part of
+        the response is not told apart from the map's own linear gain, so
+        ``response`` is an upper bound on what the control moves.
+        """
+        spec = self.spec
+        if spec.control_scale is None:
+            return None
+        h = np.asarray(self.run.betas)[:, spec.n_map:spec.n_basis, 1]       # (n, 2): w2's
+        gain = {part: interval(h[:, j], ci).to_json() for j, part in enumerate(("re", "im"))}
+        u = np.asarray(self.features.control)                               # (n_rec, 2)
+        resp = np.abs((h[:, :1] + 1j * h[:, 1:]) * (u[:, 0] - 1j * u[:, 1])[None])
+        K = spec.n_harmonics
+        c = self.features.coeffs[:, 1]
+        rel = np.median(resp, axis=0) / np.hypot(c[:, 1], c[:, K + 1])
+        return {"axis": "w2", "prior_sd": float(spec.control_scale), "gain": gain,
+                "units": "frame units per unit of the control channel",
+                "response": {name: float(rel[i]) for i, name in enumerate(self.features.names)}}
+
+    # ----------------------------------------------------------------- frequency
+    @property
+    def has_frequency(self) -> bool:
+        """Whether the model includes the frequency ``Ω(r, μ)``."""
+        return self.run.gammas is not None
+
+    def frequency(self, mu, branch: str = "stable", predictive: bool = False,
+                  omega_se: float | None = None, n_draws: int | None = N_BAND_DRAWS
+                  ) -> np.ndarray:
+        """Frequency draws (Hz) at μ, ``(n, n_mu)``; ``nan`` where the branch does not exist.
+
+        The curve is ``Ω(r(μ), μ)/2π`` (:func:`~bayeshopf.model.collapsed.frequency`);
+        ``predictive=True`` adds a new recording's error ``N(0, σ_ω² + se²)``, with
+        ``omega_se`` its standard error (rad/s; by default the training median).
+
+        Raises:
+            FitError: For a fit without the frequency model.
+        """
+        if not self.has_frequency:
+            raise FitError("this fit has no frequency model (fitted with frequency=False)")
+        idx = self._draw_indices(n_draws)
+        se = float(np.median(self.features.omega_se)) if omega_se is None else omega_se
+        return frequency_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                               self.run.gammas[idx], mu, branch_sign(branch), predictive=predictive,
+                               omega_se=se, seed=self.seed)
+
+    def frequency_band(self, mu, branch: str = "stable", predictive: bool = False,
+                       ci: float = CI) -> FrequencyBand:
+        """Median and ``ci`` band (90% by default) of the frequency (Hz) on a μ grid.
+
+        ``nan`` where fewer than half the draws have the branch.
+        """
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive), ci)
+
+    def time_series(self, mu: float, branch: str, t, phase0: float = 0.0,
+                    n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
+        """Predicted planar channels (physical units) at times ``t``, ``(n, n_t, 2)``.
+
+        The orbit of each draw traversed at its own frequency,
+        ``w(Ω t + φ_0)``, with ``φ_0`` the phase at ``t = 0`` relative to the crest
+        of z1's fundamental (the features' phase origin).
+        """
+        c = self.orbit_coefficients([mu], branch, n_draws)[:, 0]             # (n, 2, 2K+1)
+        om = 2 * np.pi * self.frequency([mu], branch, n_draws=n_draws)[:, 0]  # (n,)
+        phi = om[:, None] * np.asarray(t, dtype=float)[None] + phase0        # (n, n_t)
+        K = self.spec.n_harmonics
+        X = time_design(phi.reshape(-1), 1.0, K).reshape(phi.shape + (2 * K + 1,))
+        return self.spec.frame.from_frame(np.einsum("ntk,nck->ntc", X, c))
+
+    def time_series_bands(self, recordings: RecordingSet, n_periods: float = 4.0,
+                          channel: int = 0, ci: float = CI) -> list[TimeSeriesBand]:
+        """Median and ``ci`` band (90%) of a channel over the first ``n_periods`` of each recording.
+
+        Each prediction starts at the recording's phase at its first sample (the
+        crest of z1's fundamental, fitted over the window at the measured
+        frequency); the band then holds the frequency's and the orbit's uncertainty.
+        ``recordings`` are the training recordings, in the order of the features.
+        """
+        out = []
+        f = self.features
+        for i, r in enumerate(recordings):
+            z = r.planar(recordings.planar)
+            t = r.t - r.t[0]
+            om = float(f.omega[i])
+            t_end = n_periods * 2 * np.pi / om
+            window = t <= t_end
+            w = self.spec.frame.to_frame(z[window])
+            ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
+            phase0 = -float(np.arctan2(ab[2], ab[1]))
+            # a uniform grid of about 60 points per period; the measured value is the
+            # sample at each grid time, NaN where a sensor had no reading (left out of
+            # the recording), so that the drawn line breaks there
+            step = max(1, int(round(2 * np.pi / (om * 60 * r.dt)))) * r.dt
+            tg = np.arange(0.0, t_end + 0.5 * step, step)
+            idx = np.clip(np.searchsorted(t, tg), 0, t.size - 1)
+            near = np.where(np.abs(t[idx - 1] - tg) < np.abs(t[idx] - tg), idx - 1, idx)
+            meas = np.where(np.abs(t[near] - tg) <= 0.5 * r.dt, z[near, channel], np.nan)
+            pred = self.time_series(r.mu, r.branch, tg, phase0)[..., channel]
+            q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
+            name = recordings.planar[channel]
+            out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], tg,
+                                      meas, q[0], q[1], q[2]))
+        return out
+
+    def frequency_check(self) -> list[dict]:
+        """Each recording's measured frequency against its 90% predictive band (Hz)."""
+        f = self.features
+        out = []
+        for i in range(f.n_recordings):
+            x = self.frequency([f.mu[i]], "unstable" if f.unstable[i] else "stable",
+                               predictive=True, omega_se=float(f.omega_se[i]))[:, 0]
+            x = x[np.isfinite(x)]
+            iv = interval(x) if x.size else None
+            out.append({"name": f.names[i], "measured_hz": float(f.frequency_hz[i]),
+                        "predicted": None if iv is None else iv.to_json(),
+                        "inside_ci90": bool(iv is not None and iv.contains(f.frequency_hz[i]))})
+        return out
+
+    # ----------------------------------------------------------------- summaries
+    def default_mu_grid(self, n: int = 120) -> np.ndarray:
+        """μ from below the fold (or the Hopf point) to beyond the data."""
+        s = self.samples
+        lo = min(self.spec.mu_min, float(np.quantile(s["mu0"], 0.01)))
+        if "mu_fold" in s:
+            lo = min(lo, float(np.quantile(s["mu_fold"], 0.01)))
+        hi = max(self.spec.mu_min + self.spec.mu_span, float(np.quantile(s["mu0"], 0.99)))
+        pad = 0.05 * (hi - lo)
+        return np.linspace(lo - pad, hi + pad, n)
+
+    def _band(self, mu, branch, ci: float = CI) -> BranchBand:
+        at = band_levels(ci)
+        c = self.orbit_coefficients(mu, branch)
+        amp = self._amplitude_of(c)
+        rng = np.random.default_rng(self.seed)
+        ce = self._away_from_data(c, mu, branch)
+        amp_p = self._amplitude_of(ce + self._noise_sd(ce, None, mu, branch)
+                                   * _common_over_mu(rng, c.shape))
+        q, p = quantiles(amp, at)
+        qp, _ = quantiles(amp_p, at)
+        to_hopf = p_to_hopf = None
+        sub = self.criticality == "subcritical"
+        if sub == (branch == "unstable"):      # this branch shrinks into the Hopf point
+            mu0 = np.asarray(self.samples["mu0"])[self._draw_indices(N_BAND_DRAWS)][:, None]
+            past = (np.asarray(mu)[None] > mu0) if sub else (np.asarray(mu)[None] < mu0)
+            to_hopf, p_to_hopf = quantiles(np.where(np.isnan(amp) & past, 0.0, amp), at)
+        return BranchBand(int(branch_sign(branch)), np.asarray(mu), q, p, qp, at, to_hopf,
+                          p_to_hopf)
+
+    def diagram(self, mu=None, ci: float = CI) -> DiagramBands:
+        """The posterior bifurcation diagram with curve and predictive bands.
+
+        Args:
+            mu: μ grid (default :meth:`default_mu_grid`).
+            ci: Mass of the outer bands and of the Hopf and fold intervals
+                (the 50% band and the median are always stored).
+        """
+        mu = self.default_mu_grid() if mu is None else np.asarray(mu, float)
+        stable = self._band(mu, "stable", ci)
+        if self.criticality == "subcritical":
+            unstable = self._band(mu, "unstable", ci)
+            idx = self._draw_indices(N_BAND_DRAWS)
+            c = orbit_coefficients(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                   self.run.betas[idx], self.samples["mu_fold"][idx][:, None],
+                                   normal_form.STABLE, per_draw=True)
+            fold_amp = self._amplitude_of(c)[:, 0]
+            fold = interval(self.samples["mu_fold"], ci)
+            fold_iv = interval(fold_amp, ci)
+        else:
+            unstable, fold, fold_iv = None, None, None
+        return DiagramBands(stable, unstable, interval(self.samples["mu0"], ci), fold,
+                                  fold_iv)
+
+    @cached_property
+    def training_coefficients(self) -> tuple[np.ndarray, ...]:
+        """Predicted coefficient draws at each training recording, each ``(n, 2, 2K+1)``.
+
+        Computed once and shared by :meth:`ppc` and :meth:`orbit_error`.
+        """
+        f = self.features
+        return tuple(
+            self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable",
+                                    control=self.recording_control(i))[:, 0]
+            for i in range(f.n_recordings))
+
+    def ppc(self, ci: float = CI) -> PosteriorPredictiveCheck:
+        """Posterior predictive check of each training recording (amplitudes and coefficients).
+
+        Args:
+            ci: Mass of the amplitude intervals (90% by default).
+        """
+        f = self.features
+        curve, pred, p_amp = [], [], []
+        reps = []
+        rng = np.random.default_rng(self.seed)
+        for i, c in enumerate(self.training_coefficients):
+            rep = c + self._noise_sd(c, f.coeffs_se[i], [f.mu[i]],
+                                     "unstable" if f.unstable[i] else "stable"
+                                     ) * rng.standard_normal(c.shape)
+            reps.append(rep)
+            a, ap = self._amplitude_of(c), self._amplitude_of(rep)
+            curve.append(interval(a, ci))
+            pred.append(interval(ap, ci))
+            p_amp.append(float(np.mean(ap[np.isfinite(ap)] <= f.amplitude[i])))
+        reps = np.array(reps)                                   # (n_rec, n, 2, 2K+1)
+        flat = reps.reshape(reps.shape[0], reps.shape[1], -1)
+        obs = f.coeffs.reshape(f.n_recordings, -1)
+        coeff_p = np.nanmean(flat <= obs[:, None], axis=1)
+        coeff_z = (obs - np.nanmean(flat, axis=1)) / np.nanstd(flat, axis=1)
+        return PosteriorPredictiveCheck(
+            names=f.names, mu=f.mu, unstable=f.unstable, measured=f.amplitude,
+            curve=tuple(curve), predictive=tuple(pred), amplitude_p=np.array(p_amp),
+            coeff_p=coeff_p, coeff_z=coeff_z,
+            measured_se=f.amplitude_sd / np.sqrt(np.maximum(f.n_segments, 1)))
+
+    @cached_property
+    def log_likelihood(self) -> np.ndarray:
+        """``log p(y_i | y_{−i}, θ_s)`` per chain, draw and recording, ``(chains, draws, n_rec)``.
+
+        The pointwise log-likelihood of PSIS-LOO for this non-factorised model
+        (:func:`~bayeshopf.model.collapsed.pointwise_log_likelihood`): given θ
+        the map is refitted exactly without recording i.
+        """
+        shape = next(iter(self.run.chains.values())).shape[:2]
+        ll = np.asarray(self._log_likelihood_dispatched)
+        return ll.reshape(shape + (self.features.n_recordings,))
+
+    @cached_property
+    def _log_likelihood_dispatched(self):
+        """:attr:`log_likelihood`'s draws as JAX's asynchronous dispatch returns them."""
+        theta = {k: v.reshape((-1,) + v.shape[2:]) for k, v in self.run.chains.items()
+                 if k in self.map_point.params}
+        return log_likelihood_program(self.spec, theta, self.features)
+
+    def dispatch(self) -> None:
+        """Start the computation :meth:`to_inference_data` waits longest for, and return.
+
+        JAX runs a compiled program on its own threads and returns at once
+        (asynchronous dispatch): the pointwise log-likelihood of every draw
+        then runs beside what Python does next, the figures in the CLI, and
+        :attr:`log_likelihood` collects it.
+        """
+        if "log_likelihood" not in self.__dict__:
+            self._log_likelihood_dispatched  # noqa: B018 (dispatches)
+
+    def to_inference_data(self):
+        """The fit as ArviZ :class:`~arviz.InferenceData` (ArviZ 0.x).
+
+        Its groups, coordinates and attributes:
+        :func:`~bayeshopf.diagnostics.inference_data.to_inference_data`. The file
+        :func:`~bayeshopf.fit_folder.save_hybrid` writes is this object (``posterior.nc``).
+        """
+        from bayeshopf.diagnostics import inference_data
+
+        return inference_data.to_inference_data(self)
+
+    def orbit_error(self) -> list[dict]:
+        """Each recording's posterior-median orbit against its measured mean orbit.
+
+        ``relative``: RMS distance over the orbit (frame units), relative to the
+        measured orbit's RMS radius; ``spread``: the segments' RMS distance from
+        their mean orbit, relative to the same radius; ``ok``: relative below
+        :data:`~bayeshopf.diagnostics.fit_checks.ORBIT_ERROR_MAX` or below
+        :data:`~bayeshopf.diagnostics.fit_checks.ORBIT_SPREAD_FACTOR` × spread;
+        ``by_harmonic``: the part of ``relative`` in the centre and in each
+        harmonic 1…K (:func:`~bayeshopf.diagnostics.fit_checks.orbit_error_parts`;
+        their squares add up to ``relative``'s).
+        """
+        f = self.features
+        phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
+        out = []
+        for i, c in enumerate(self.training_coefficients):
+            c = c[np.all(np.isfinite(c), axis=(1, 2))]
+            data = reconstruct(f.coeffs[i], phi)
+            radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
+            if c.shape[0] == 0:
+                out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False,
+                            "by_harmonic": None})
+                continue
+            median = np.median(c, axis=0)
+            model = reconstruct(median, phi)
+            rel = float(np.sqrt(np.mean(np.sum((model - data) ** 2, -1)))) / radius
+            spread = float(f.segment_rms[i]) / radius
+            out.append({"name": f.names[i], "relative": rel, "spread": spread,
+                        "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread),
+                        "by_harmonic": (orbit_error_parts(median, f.coeffs[i]) / radius).tolist()})
+        return out
+
+
+def log_likelihood_program(spec: cm.CollapsedSpec, theta: dict, features: HarmonicFeatures):
+    """``log p(y_i | y_{−i}, θ_s)`` of each draw and recording as a JAX array, dispatched.
+
+    :func:`~bayeshopf.inference.collapsed.pointwise_log_likelihood_draws` on the
+    model's arguments for ``spec`` and ``features``; not waited for.
+    """
+    return ci.pointwise_log_likelihood_draws(ci.model_arguments(spec, features), theta)
