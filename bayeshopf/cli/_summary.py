@@ -138,6 +138,9 @@ def _print_diagnostics(summary: dict) -> None:
         print(f"bands of new measurements away from the recordings: model-error scale "
               f"{away['scale']:.2g} ({why})")
     for w in diag.get("warnings", []):
+        # the library names the function; on the command line it is a flag
+        w = w.replace("by leave-one-out: bayeshopf.validation.leave_one_out",
+                      "with fit --leave-one-out")
         print(f"warning: {w}")
 
 
