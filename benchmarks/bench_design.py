@@ -243,7 +243,9 @@ def main(argv=None) -> int:
                           "delta_mu": args.delta_mu},
              "summary": table, "results": results}, indent=1))
         atomic_write(stem.with_suffix(".md"), "# Simulated CBC campaigns (bench_design.py)\n\n"
-                     + __doc__.split("\n\n")[1] + "\n\n"
+                     + __doc__.split("\n\n")[1].replace("adds 4 recordings",
+                                                           f"adds {args.steps} recordings")
+                     + "\n\n"
                      + f"Seeds {', '.join(str(r['seed']) for r in results)} "
                      f"({len(results)} campaigns).\n\n"
                      + md + "\n")
