@@ -1,7 +1,8 @@
 """The collapsed core on the demo (3-DOF aerofoil) and the rig: timings, NUTS against SVI, fit.
 
-Run: ``python benchmarks/bench_collapsed.py [rig|demo|both]``. Writes
-``benchmarks/collapsed_<case>.json`` and prints a Markdown table. Each case: one cold
+Run: ``python benchmarks/bench_collapsed.py [rig|demo|both]``. Both cases (the
+default) write the current ``benchmarks/collapsed.json``; one case alone goes to
+``benchmarks/results/collapsed_<case>.json``. It prints a Markdown table. Each case: one cold
 ``bayeshopf fit``-equivalent run in a fresh process is timed by the caller
 (``time bayeshopf fit ...``); here the stages are timed in-process, NUTS (the
 default posterior) and SVI are both run from the same MAP point, and their 90%
@@ -16,6 +17,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS_DIR, atomic_write, exit_on_help  # noqa: E402
 
 HERE = Path(__file__).parent
 
@@ -66,8 +70,9 @@ def main(which="both"):
 
         rs, truth = flutter_experiment(seed=0)
         results.append(run("demo (3-DOF, seed 0)", rs, truth))
-    path = HERE / f"collapsed_{which}.json"
-    path.write_text(json.dumps(results, indent=1, default=float))
+    # the current result is the run of both cases; a single case is a side run
+    path = HERE / "collapsed.json" if which == "both" else RESULTS_DIR / f"collapsed_{which}.json"
+    atomic_write(path, json.dumps(results, indent=1, default=float))
     for r in results:
         print(f"\n## {r['case']}: {r['wall_s']:.1f} s in-process ({r['timings_s']})")
         for k, v in r["intervals"].items():
@@ -83,7 +88,5 @@ def main(which="both"):
 
 
 if __name__ == "__main__":
-    from _common import exit_on_help
-
     exit_on_help(__doc__)
     main(sys.argv[1] if len(sys.argv) > 1 else "both")

@@ -25,6 +25,9 @@ from bayeshopf.discrepancy import analyse, simulate_with_effect  # noqa: E402
 from bayeshopf.discrepancy.effects import truth_points  # noqa: E402
 from bayeshopf.simulators import get_system, simulate_recordings  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
+
 PLAN = [(15.75, "stable"), (16.25, "stable"), (16.75, "stable"), (17.25, "stable"),
         (15.75, "unstable"), (16.25, "unstable"), (16.75, "unstable"), (17.25, "unstable")]
 #: Freeplay removes the linear stiffness at the equilibrium and moves the Hopf point, so
@@ -169,7 +172,9 @@ def main() -> None:
         here = Path(__file__).parent
 
         def write(rows):
-            (here / "discrepancy_smallest.json").write_text(json.dumps(rows, indent=1) + "\n")
+            # the quoted table is the .md; the raw rows are a side run's
+            atomic_write(RESULTS_DIR / "discrepancy_smallest.json",
+                         json.dumps(rows, indent=1) + "\n")
             (here / "discrepancy_smallest.md").write_text(
                 "# Smallest detected effect per kind (flutter3dof, blind)\n\nEach effect "
                 "divided by 4 until the verdict no longer names it with the truth in its 90% "

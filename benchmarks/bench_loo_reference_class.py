@@ -4,7 +4,7 @@ Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig] [--e
 ``benchmarks/loo_reference_class.json`` (after every system, so a long run can be read as it goes);
 ``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits);
 ``--effects`` runs the class with missing physics instead (below), into
-``benchmarks/loo_reference_class_effects.json``; ``--resume`` goes on after the last
+``benchmarks/results/loo_reference_class_effects.json``; ``--resume`` goes on after the last
 seed the file holds; ``--in-sample [--effects]`` adds each kept system's fit of all
 seven recordings and its own checks (:func:`in_sample`, a probe written after the
 results). A held-out recording whose refit has no orbit of its branch
@@ -104,7 +104,7 @@ from bench_loo_model_error import SCALES, _band, _ml_scale, _residual  # noqa: E
 
 HERE = Path(__file__).parent
 OUT = HERE / "loo_reference_class.json"
-OUT_EFFECTS = HERE / "loo_reference_class_effects.json"
+OUT_EFFECTS = RESULTS_DIR / "loo_reference_class_effects.json"
 FIRST_SEED_EFFECTS = 500
 OUT_EFFECTS_B = RESULTS_DIR / "loo_reference_class_effects_b.json"
 FIRST_SEED_EFFECTS_B = 700

@@ -299,10 +299,9 @@ def test_a_large_relative_model_error_widens_new_bands_away_from_the_data_and_sa
     """In each posterior draw whose relative model error σ_rel is above its 2% limit, a new
     measurement's band away from the recordings takes the scale 0.7 instead of 0.1
     (simulated rigs whose fits fail this check: 18 of 56 held out inside at 0.1,
-    ``benchmarks/loo_reference_class_effects*.json``); unchanged at a training μ; the
-    warning says so; a saved fit keeps the rule. A scale set by the user is kept whatever
-    σ_rel, and the warning then says the bands are not calibrated. Below the limit in
-    every draw: 0.1, and no warning."""
+    ``docs/changelog.md``); unchanged at a training μ; the warning says so; a saved fit
+    keeps the rule. A scale set by the user is kept whatever σ_rel, and the warning then
+    says the bands are not calibrated. Below the limit in every draw: 0.1, and no warning."""
     from bayeshopf import fit_folder
     from bayeshopf.posterior import SIGMA_REL_MAX, diagnose
 
