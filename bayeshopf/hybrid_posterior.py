@@ -440,9 +440,18 @@ class HybridPosterior:
     def ppc(self, ci: float = CI) -> PosteriorPredictiveCheck:
         """Posterior predictive check of each training recording (amplitudes and coefficients).
 
+        Computed once per ``ci`` (its replicates are seeded, so the same each
+        time): the checks, the summary, the figures and the lab report share it.
+
         Args:
             ci: Mass of the amplitude intervals (90% by default).
         """
+        memo = self.__dict__.setdefault("_ppc_memo", {})
+        if ci not in memo:
+            memo[ci] = self._ppc(ci)
+        return memo[ci]
+
+    def _ppc(self, ci: float) -> PosteriorPredictiveCheck:
         f = self.features
         curve, pred, p_amp = [], [], []
         reps = []

@@ -24,6 +24,7 @@ from bayeshopf._format import format_number, interval_text
 from bayeshopf._version import __version__
 from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.errors import OutputError
+from bayeshopf.fit_folder import SUMMARY
 
 __all__ = ["lab_report_html", "write_lab_report"]
 
@@ -129,8 +130,10 @@ def lab_report_html(fit, recordings=None, *, ci: float = CI, title: str | None =
                       f"predicted ({amp_u})", "inside", "segments", "frequency (Hz)"],
                      rec_rows, {1, 3, 4, 6, 7})]
 
-    settings = {k: v for k, v in post.settings.__dict__.items()}
-    made_with = (d.details.get("posterior", {}) or {}).get("bayeshopf_version")
+    settings = dict(post.settings.__dict__)
+    made_with = None
+    if fit.folder is not None and (fit.folder / SUMMARY).is_file():
+        made_with = json.loads((fit.folder / SUMMARY).read_text()).get("bayeshopf_version")
     parts += ["<h2>Settings and provenance</h2>",
               f"<p>Seed {post.seed}; {np.shape(post.samples['mu0'])[0]} posterior draws "
               f"({html.escape(post.run.method)}). Page made by bayeshopf {__version__} on "

@@ -164,3 +164,25 @@ def test_fit_leaves_out_unconverged_cbc_recordings(fast_demo_fit, monkeypatch):
     assert [r.name for r in seen[0]] == [r.name for i, r in enumerate(rs) if i != bad]
     bh.fit(marked, progress=False, keep_unconverged=True)
     assert len(seen[1]) == len(rs)
+
+
+def test_the_command_line_screens_with_the_same_function(fast_demo_fit, capsys, monkeypatch):
+    from dataclasses import replace
+
+    from bayeshopf.cli import fit as cli_fit
+    from bayeshopf.cli.main import build_parser
+    from bayeshopf.data.convergence import Convergence
+    from bayeshopf.data.recording import RecordingSet
+
+    _, rs, _ = fast_demo_fit
+    recs = [replace(r, convergence=Convergence(success=False)) if i == 0 else r
+            for i, r in enumerate(rs)]
+    marked = RecordingSet(tuple(recs), planar=rs.planar)
+    for keep, n in ((False, len(rs) - 1), (True, len(rs))):
+        args = build_parser().parse_args(
+            ["fit", "somewhere", "--out", "x"] + (["--keep-unconverged"] if keep else []))
+        monkeypatch.setattr(cli_fit, "_read", lambda a: marked)
+        assert len(cli_fit.recordings(args)) == n
+        err = capsys.readouterr().err
+        assert f"data: {rs[0].name}: the controller did not converge" in err
+        assert ("kept" if keep else "left out") in err

@@ -72,6 +72,7 @@ def test_the_command_writes_the_page_and_refuses_a_missing_folder(page, tmp_path
     assert main(["report", str(folder), "--ci", "0.8"]) == 0
     text = (folder / "report.html").read_text(encoding="utf-8")
     assert "<svg" in text and "80% equal-tailed" in text
+    assert "fitted with bayeshopf" in text          # the version read from the folder
     assert main(["report", str(tmp_path / "nowhere")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nowhere" in err[0] and "Traceback" not in err[0]

@@ -13,6 +13,7 @@ from bayeshopf.cli.download import DATASETS
 from bayeshopf.data import load_recordings
 from bayeshopf.data.datasets import flutter_cbc
 from bayeshopf.data.io import dropped_report
+from bayeshopf.data.screening import screened
 from bayeshopf.errors import DataError, FitError
 
 DESCRIPTION = ("Fit a folder of CBC .mat files or an interchange folder (manifest.csv + one "
@@ -58,6 +59,10 @@ def add_arguments(f: argparse.ArgumentParser) -> None:
                      help="leave out the orbits' response to the CBC controller's residual "
                      "fundamental (in the model by default where the rig description names a "
                      "control channel, as the built-in flutter_cbc rig does)")
+    f.add_argument("--keep-unconverged", action="store_true",
+                   help="keep the CBC recordings on which the controller did not converge "
+                   "(where the rig description names the convergence fields; left out by "
+                   "default: such a recording is not an orbit of the uncontrolled system)")
     add_fit_options(f)
 
 
@@ -67,7 +72,9 @@ def recordings(args):
     Raises:
         DataError: Naming DATA, ``--dataset``, ``--rig`` or ``--control``.
     """
-    rs = _read(args)
+    rs, lines = screened(_read(args), args.keep_unconverged)
+    for line in lines:
+        print(f"data: {line}", file=sys.stderr)
     if args.control is None:
         return rs
     try:

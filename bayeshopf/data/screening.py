@@ -12,7 +12,7 @@ from __future__ import annotations
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import DataError
 
-__all__ = ["converged_only", "convergence_report", "unconverged"]
+__all__ = ["converged_only", "convergence_report", "screened", "unconverged"]
 
 
 def unconverged(rs: RecordingSet) -> tuple[int, ...]:
@@ -42,3 +42,16 @@ def converged_only(rs: RecordingSet) -> RecordingSet:
                         f"converged expected; found none of {len(rs)} ({rs[0].name}: "
                         f"{rs[0].convergence.describe()})")
     return rs.subset([i for i in range(len(rs)) if i not in bad])
+
+
+def screened(rs: RecordingSet, keep: bool = False) -> tuple[RecordingSet, list[str]]:
+    """``rs`` without its unconverged controlled recordings (all of it with ``keep``).
+
+    Returns:
+        The recordings to fit and one line per recording left out (or kept
+        although it did not converge), for the caller's warning.
+    """
+    lines = convergence_report(rs)
+    if keep:
+        return rs, [f"{line}; kept" for line in lines]
+    return converged_only(rs), [f"{line}; left out" for line in lines]
