@@ -36,7 +36,8 @@ table { border-collapse: collapse; margin: 0.5rem 0; }
 th, td { padding: 0.2rem 0.7rem; border-bottom: 1px solid #eee; text-align: left; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .ok { color: #176b1b; font-weight: 600; } .warning { color: #a8420a; font-weight: 600; }
-figure { margin: 1rem 0; } figure svg { max-width: 100%; height: auto; }
+figure { margin: 1.5rem 0; } figure svg { max-width: 100%; height: auto; }
+figcaption { font-weight: 600; margin-bottom: 0.3rem; }
 pre { background: #f6f6f6; padding: 0.6rem; overflow-x: auto; }
 """
 
@@ -111,7 +112,8 @@ def lab_report_html(fit, recordings=None, *, ci: float = CI, title: str | None =
     if recordings is not None:
         figures.append(("Time series", plots.time_series(recordings, ci=ci)))
     parts.append("<h2>Figures</h2>")
-    parts += [f"<figure>{_svg(fig)}<figcaption>{html.escape(cap)}</figcaption></figure>"
+    # the caption above its figure, so that it is not read as the next one's heading
+    parts += [f"<figure><figcaption>{html.escape(cap)}</figcaption>{_svg(fig)}</figure>"
               for cap, fig in figures]
 
     ppc = post.ppc(ci)
