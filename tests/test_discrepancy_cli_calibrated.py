@@ -142,6 +142,27 @@ def test_cli_writes_and_prints_the_calibrated_report(cli_run):
         assert (out / "figures" / f).stat().st_size > 10_000
 
 
+def test_cli_reports_bayes_factors_apart_from_the_prior_odds(cli_run):
+    d, _, out = cli_run
+    v = d["verdict"]
+    bf, cp = v["bayes_factors"], d["calibration"]["class_probabilities"]
+    assert sum(bf["prior"].values()) == pytest.approx(1.0)
+    # prior odds times Bayes factor give the posterior odds of the stated probabilities
+    checked = 0
+    for c in cp:
+        for o in ("none", "parameters off"):
+            if c != o and min(cp[c], cp[o]) > 1e-200:
+                odds = bf["log_bayes_factor"][c][o] + np.log(bf["prior"][c] / bf["prior"][o])
+                assert odds == pytest.approx(np.log(cp[c] / cp[o]), abs=1e-6)
+                checked += 1
+    assert checked >= 1
+    band = v["prior_sensitivity"]
+    assert band and set(band[0]["scales"]) == {"0.5", "2.0"}
+    md = (out / "report.md").read_text()
+    assert "## Bayes factors (apart from the prior odds)" in md
+    assert "over prior scales ×0.5–×2" in md
+
+
 def test_diagram_title_names_terms_then_parameters_and_wraps():
     from bayeshopf.plotting.discrepancy import diagram_title
 

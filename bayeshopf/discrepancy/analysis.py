@@ -173,7 +173,8 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
     elif calibrate and not system.uncertain:
         raise CalibrationError(f"{system.name}: calibrate=True needs uncertain parameters "
                                "(System.uncertain); it declares none (use calibrate=False)")
-    prepared = prepare(recordings, system, K, kinds)
+    prepared = prepare(recordings, system, K, kinds,
+                       parameters=[u.name for u in system.uncertain] if calibrate else ())
     cal_report = None
     if calibrate:
         data, fits, extras, cal_report = with_calibration(recordings, system, prepared, K=K,

@@ -140,7 +140,7 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
             "chi2": f.chi2, "coefficient": {"median": f.median, "ci90": list(f.ci90),
                                             "units": f.term.units,
                                             "prior_scale": f.term.scale},
-            "refined": f.refined, "separability": f.separability,
+            "refined": f.refined, "separability": f.separability, "evidence": f.evidence,
             "parameters_off": [p.name for p in f.parameters if p.off],
             "recordings_without_orbit": [mf.names[i] for i in f.lost]})
     for f in rep.pairs:                          # two terms fitted jointly
@@ -149,7 +149,8 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
             "log_evidence": f.log_z, "chi2": f.chi2, "coefficient": None,
             "coefficients": [{"name": t.name, "median": m, "ci90": list(ci), "units": t.units}
                              for t, m, ci in zip(f.terms, f.medians, f.ci90, strict=True)],
-            "refined": f.refined, "parameters_off": [p.name for p in f.parameters if p.off]})
+            "refined": f.refined, "evidence": f.evidence,
+            "parameters_off": [p.name for p in f.parameters if p.off]})
     models[2:] = sorted(models[2:], key=lambda m: -m["probability"])
     data = {
         "verdict": verdict,

@@ -28,7 +28,9 @@ named steps:
 2. **Screen, then refine the terms** (:func:`_scan_terms`). Fitting every term
    in full costs as much as the calibration itself, and most terms are
    hopeless. Every term is first *screened* (the linear model at the
-   calibration); the :data:`N_REFINE` terms of highest screened evidence, among
+   calibration); the :data:`N_REFINE` terms of highest screened evidence before
+   the screening's charge (what the linear model promises; the charge says the
+   linearisation does not hold that far, which only a full fit settles), among
    those within :data:`SCREEN_NATS` of the best, are then fitted in full, and
    again the most probable term as long as it is only screened; the others keep
    their screened evidence (``refined=False``). A full fit starts from the
@@ -48,7 +50,13 @@ named steps:
 (:math:`M_0`), "parameters off" (:math:`M_P`) and "a term missing", the last
 shared by the :math:`n` single terms (1/6) and the :math:`n(n-1)/2` pairs (1/6);
 :math:`P(M \mid y) \propto \pi_M Z_M` (:func:`_probabilities`). Without the
-scan, 1/2 each for :math:`M_0` and :math:`M_P`. Nothing hand-set enters the
+scan, 1/2 each for :math:`M_0` and :math:`M_P`. A term model nested on
+:math:`M_P` (or a pair on one of its terms) whose fit is confirmed at its mode
+takes :math:`Z_M` from the Savage–Dickey ratio on its coefficients' marginal
+(:mod:`~bayeshopf.discrepancy.nested`, which argues where), so it neither wins
+nor loses by where the nested model's optimiser stopped; the verdict also
+gives each class's Bayes factor apart from the prior odds, and the most
+probable terms' Bayes factor with the prior scales halved and doubled. Nothing hand-set enters the
 comparison of models; the posterior of :math:`\tau` under the verdict's model
 is reported (``verdict["model_error"]``).
 
@@ -61,11 +69,13 @@ parameter changes every orbit in a pattern a nonlinear term cannot copy at
 all amplitudes at once), and the Floquet stability of each branch (a
 calibration that moves a fold past a recording loses its orbit). A term that
 *is* an uncertain parameter in another guise (``alpha_cubic_stiffness`` is a
-change of ``k_alpha3``) is told apart only by the prior: within the
-parameter's prior width the evidence prefers the recalibration, by design.
+change of ``k_alpha3``) could be told apart only by the prior, so it is left
+out of the candidates (:func:`~bayeshopf.discrepancy.terms.library` with the
+calibrated ``parameters``; :attr:`~bayeshopf.discrepancy.terms.Library.skipped`)
+and the verdict names the parameter "equivalently" as that term.
 :attr:`~bayeshopf.discrepancy.records.CalibratedTermFit.separability`
-measures this: the share of a term's effect on the whitened features that no
-change of the parameters can mimic (0 for such a duplicate).
+measures what remains of this for the other terms: the share of a term's
+effect on the whitened features that no change of the parameters can mimic.
 """
 
 from __future__ import annotations
@@ -93,6 +103,7 @@ from bayeshopf.discrepancy.fitting import (
     screen_second,
     screen_term,
 )
+from bayeshopf.discrepancy.nested import class_bayes_factors, nested_log_z, sensitivity
 from bayeshopf.discrepancy.prepare import Prepared, prepare
 from bayeshopf.discrepancy.problem import MAX_NFEV
 from bayeshopf.discrepancy.records import (
@@ -113,7 +124,12 @@ from bayeshopf.discrepancy.records import (
 )
 from bayeshopf.discrepancy.select import ALPHA, TIE_FACTOR, Fitter
 from bayeshopf.discrepancy.terms import KINDS, Library
-from bayeshopf.discrepancy.verdict import EXPLAINED_FACTOR, MIN_MODEL_ERROR, build_verdict
+from bayeshopf.discrepancy.verdict import (
+    EXPLAINED_FACTOR,
+    MIN_MODEL_ERROR,
+    build_verdict,
+    with_bayes_factors,
+)
 from bayeshopf.simulators.base import System, UncertainParameter
 from bayeshopf.simulators.registry import get_system
 
@@ -144,6 +160,17 @@ _Probabilities = Callable[[Sequence[CalibratedTermFit], Sequence[CalibratedPairF
                           dict[str, float]]
 
 
+def _log_priors(fits: Sequence[CalibratedTermFit], pair_fits: Sequence[CalibratedPairFit], *,
+                scan: bool, pairs: int, n: int) -> dict[str, float]:
+    """Log prior probability of every model (module docstring, "Model probabilities")."""
+    if not scan:
+        return {"none": np.log(0.5), "parameters": np.log(0.5)}
+    lp = {"none": np.log(1 / 3), "parameters": np.log(1 / 3)}
+    lp.update({f.term.name: np.log(1 / 3 / (2 if pairs else 1) / n) for f in fits})
+    lp.update({f.name: np.log(1 / 6 / (n * (n - 1) // 2)) for f in pair_fits})
+    return lp
+
+
 def _probabilities(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit],
                    pair_fits: Sequence[CalibratedPairFit], *, scan: bool, pairs: int,
                    n: int) -> dict[str, float]:
@@ -157,17 +184,59 @@ def _probabilities(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit]
         pairs: Whether pairs share the prior of "a term missing".
         n: Number of terms in the library.
     """
-    if not scan:
-        lp = {"none": np.log(0.5), "parameters": np.log(0.5)}
-    else:
-        lp = {"none": np.log(1 / 3), "parameters": np.log(1 / 3)}
-        lp.update({f.term.name: np.log(1 / 3 / (2 if pairs else 1) / n) for f in fits})
-        lp.update({f.name: np.log(1 / 6 / (n * (n - 1) // 2)) for f in pair_fits})
+    lp = _log_priors(fits, pair_fits, scan=scan, pairs=pairs, n=n)
     lz = {"none": log_z["none"], "parameters": log_z["parameters"],
           **{f.term.name: f.log_z for f in fits}, **{f.name: f.log_z for f in pair_fits}}
     lw = np.array([lp[k] + lz[k] for k in lz])
     w = np.exp(lw - lw.max())
     return dict(zip(lz, (float(v) for v in w / w.sum()), strict=True))
+
+
+def _nest(log_z_p: float, fits: Sequence[CalibratedTermFit],
+          pair_fits: Sequence[CalibratedPairFit]
+          ) -> tuple[list[CalibratedTermFit], list[CalibratedPairFit]]:
+    """The fits with the evidence compared (:func:`~bayeshopf.discrepancy.nested.nested_log_z`).
+
+    Savage–Dickey against the nested model where that uses it, else their own.
+    """
+    lz, how = nested_log_z(log_z_p, fits, pair_fits)
+    return ([replace(f, log_z=lz[f.term.name], evidence=how[f.term.name]) for f in fits],
+            [replace(f, log_z=lz[f.name], evidence=how[f.name]) for f in pair_fits])
+
+
+def _promise(f: CalibratedPairFit) -> CalibratedPairFit:
+    """A screened pair with the evidence its linear model promises (its charge given back)."""
+    return replace(f, log_z=f.log_z + f.penalty,
+                   log_z_laplace=(f.log_z_laplace if f.log_z_laplace is not None
+                                  else f.log_z) + f.penalty)
+
+
+def _bayes(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit],
+           pair_fits: Sequence[CalibratedPairFit], probs: Mapping[str, float], best_model: str,
+           *, scan: bool, pairs: int, n: int) -> tuple[dict, list[dict]]:
+    """The classes' Bayes factors and prior probabilities, and the prior-scale bands.
+
+    The bands are those of the two most probable single terms and of the
+    verdict's model when it is a pair (:mod:`~bayeshopf.discrepancy.nested`).
+    """
+    lp = _log_priors(fits, pair_fits, scan=scan, pairs=pairs, n=n)
+    bayes = class_bayes_factors(lp, log_z, {
+        KIND_NONE: ["none"], KIND_PARAMS: ["parameters"],
+        KIND_TERM: [f.term.name for f in fits] + [f.name for f in pair_fits]})
+    top = sorted(fits, key=lambda f: -probs[f.term.name])[:2]
+    top += [f for f in pair_fits if f.name == best_model]
+    bands = []
+    for f in top:
+        single = isinstance(f, CalibratedTermFit)
+        name = f.term.name if single else f.name
+        if f.coefficients is None:
+            continue
+        b = log_z[name] - log_z["parameters"]
+        label = f.term.plain if single else " together with ".join(t.plain for t in f.terms)
+        bands.append({"model": name, "label": label, "evidence": f.evidence,
+                      "log_bayes_factor": b,
+                      "scales": {str(k): b + v for k, v in sensitivity(f.coefficients).items()}})
+    return bayes, bands
 
 
 def _classes(probs: Mapping[str, float], fits: Sequence[CalibratedTermFit],
@@ -228,9 +297,11 @@ def _scan_terms(fitter: Fitter, unc: Sequence[UncertainParameter], lib: Library,
     secs["screen"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     start = "nominal" if compromise else "calibration"
-    order = [int(i) for i in np.argsort([-f.log_z for f in fits])]
-    top_screened = fits[order[0]].log_z
-    todo = [i for i in order[:n_ref] if fits[i].log_z >= top_screened - SCREEN_NATS]
+    # ranked by what the linear model at the calibration promises, before its charge: the
+    # charge says that linearisation does not hold that far, which a full fit settles
+    promise = [f.log_z + f.penalty for f in fits]
+    order = [int(i) for i in np.argsort([-v for v in promise])]
+    todo = [i for i in order[:n_ref] if promise[i] >= promise[order[0]] - SCREEN_NATS]
     bar = tqdm(total=len(todo), desc="terms", disable=not progress, leave=False)
     while n_ref and (todo or not fits[int(np.argmax([f.log_z for f in fits]))].refined):
         # then the most probable term, as long as it is only screened
@@ -285,6 +356,9 @@ def _scan_pairs(fitter: Fitter, unc: Sequence[UncertainParameter], lib: Library,
                             if frozenset(t.name for t in f.terms) not in have]
         probs = probabilities(fits, pair_fits)
     for _ in range(N_PAIR_REFINE if n_ref else 0):
+        # as for the single terms: screened pairs ranked by what their linear model
+        # promises, before the charge that a full fit settles
+        probs = probabilities(fits, [f if f.refined else _promise(f) for f in pair_fits])
         todo_p = [k for k, f in enumerate(pair_fits)
                   if not f.refined and probs[f.name] > PAIR_REFINE]
         if not todo_p:
@@ -368,7 +442,7 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
         refine: How many terms to fit in full: every term is first screened by
             the linear model at the calibration
             (:func:`~bayeshopf.discrepancy.fitting.screen_term`), then the
-            ``refine`` with the highest screened evidence, among those within
+            ``refine`` with the highest screened evidence before its charge, among those within
             :data:`SCREEN_NATS` of the best, are fitted in full
             (:func:`~bayeshopf.discrepancy.fitting.fit_term`), then the most
             probable term as long as it is only screened. ``None``: every term
@@ -406,7 +480,9 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     if not unc:
         raise CalibrationError(f"{system.name}: uncertain parameters expected (System."
                                "uncertain, a tuple of UncertainParameter); it declares none")
-    fitter, _, notes = prepare(recordings, system, K, kinds) if prepared is None else prepared
+    if prepared is None:
+        prepared = prepare(recordings, system, K, kinds, parameters=[u.name for u in unc])
+    fitter, _, notes = prepared
     lib = fitter.lib
     secs = {"prepare": time.perf_counter() - t0}
     R, P = fitter.mf.y.shape
@@ -426,6 +502,7 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     n = len(lib.terms)
 
     def probabilities(fits, pair_fits) -> dict[str, float]:
+        fits, pair_fits = _nest(log_z["parameters"], fits, pair_fits)
         return _probabilities(log_z, fits, pair_fits, scan=scan, pairs=pairs, n=n)
 
     # 2., 3. the terms and pairs of terms
@@ -444,6 +521,7 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
                                        probabilities=probabilities)
             secs.update(s)
             secs["pairs"] = time.perf_counter() - t1
+    fits, pair_fits = _nest(log_z["parameters"], fits, pair_fits)
     for f in fits:
         log_z[f.term.name] = f.log_z
         errors[f.term.name] = f.model_error
@@ -461,19 +539,24 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     t1 = time.perf_counter()
     cal, fits, pair_fits = _check_best(best_model, unc, cal, fits, pair_fits, errors[best_model],
                                        max_nfev)
-    if best_model == "parameters":
-        log_z["parameters"], errors["parameters"] = cal.log_z, cal.model_error
-    elif best_model != "none":
-        f = next(f for f in [*fits, *pair_fits]
-                 if (f.term.name if isinstance(f, CalibratedTermFit) else f.name) == best_model)
-        log_z[best_model], errors[best_model] = f.log_z, f.model_error
+    # a refit of the best model (or of M_P) moves the evidences nested on it
+    log_z["parameters"], errors["parameters"] = cal.log_z, cal.model_error
+    fits, pair_fits = _nest(log_z["parameters"], fits, pair_fits)
+    for f in fits:
+        log_z[f.term.name], errors[f.term.name] = f.log_z, f.model_error
+    for f in pair_fits:
+        log_z[f.name], errors[f.name] = f.log_z, f.model_error
     probs = probabilities(fits, pair_fits)
+    fits.sort(key=lambda f: -probs[f.term.name])
+    pair_fits.sort(key=lambda f: -probs[f.name])
     classes = _classes(probs, fits, pair_fits)
     secs["check off"] = time.perf_counter() - t1
 
     # 5. the verdict
     verdict = build_verdict(system, lib, fitter, cal, fits, pair_fits, probs, classes,
                             best_class, best_model, me0, errors[best_model], notes)
+    verdict = with_bayes_factors(verdict, *_bayes(log_z, fits, pair_fits, probs, best_model,
+                                                  scan=scan, pairs=pairs, n=n))
     secs["total"] = time.perf_counter() - t0
     return CalibrationReport(system=system.name, verdict=verdict, log_z=log_z,
                              probabilities=probs, class_probabilities=classes,

@@ -128,7 +128,7 @@ def with_effect(system: System, name: str, value: float) -> System:
         return _delayed_aero(system, value)
     amp, f = _typical(system)
     term = library(system, amp, f)[name]
-    if term.positive and value < 0:
+    if term.kind == "freeplay" and value < 0:
         raise TermError(f"effect value: a freeplay gap >= 0 expected; got {value!r}")
     pos = system.state_names.index(term.coordinate)
     vname = f"{term.coordinate}_dot"

@@ -13,7 +13,8 @@ rows are the standard normal prior rows of the unknowns
 :math:`(2\pi)^{d/2}`), and :math:`\log Z_0 = -\tfrac12\lVert e(0)\rVert^2`. For
 :math:`M_k` the parameters are integrated out analytically and the term's
 coefficient in closed form (a normal in :math:`\zeta`, truncated at 0 for a
-gap): with :math:`G = [G_z, g]`,
+gap or a dissipative term, whose half-normal prior adds :math:`\log 2`): with
+:math:`G = [G_z, g]`,
 :math:`P_\perp = I - G_z (G_z^\top G_z)^{-1} G_z^\top`,
 
 .. math::  \log Z_k = \log\int \exp\!\big(-\tfrac12 \lVert P_\perp (E + g(\zeta - \hat\zeta))

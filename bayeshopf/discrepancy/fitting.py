@@ -21,6 +21,17 @@ second term whose signature only shows once the first is in; fitted in full
 by :func:`refit_pair`. The coefficients' correlation says whether the data
 see both terms or only their combination.
 
+**The linearisation checked, for every model.** Every evidence here is a
+Laplace evidence about some point: the calibration's mode (screened terms and
+pairs), a refined single term's mode (stepwise pairs) or a model's own mode
+(refined fits). Each pays the same charge
+(:func:`~bayeshopf.discrepancy.problem.charge`): the orbits are re-shot at the
+linear model's mode and the misfit it promised is replaced by the lower of
+the re-shot one and the one at the point of expansion. A screened model
+costs one more orbit set for it; without it a screened model would keep a
+credit that a refined one on the same linearisation pays back, and the two
+would not be comparable in one posterior.
+
 **Refits.** The modes are found at a fixed whitening, and a fit is redone at
 its own posterior median of τ when that changes σ by more than
 :data:`REFIT_FACTOR` (:func:`needs_refit`, :func:`refit_term`,
@@ -57,8 +68,9 @@ from bayeshopf.discrepancy.evidence import (
     _zeta_gaussian,
     laplace_evidence,
 )
+from bayeshopf.discrepancy.nested import CoefficientPosterior, gaussian_marginal
 from bayeshopf.discrepancy.orbits import OrbitBatch
-from bayeshopf.discrepancy.problem import MAX_NFEV, Problem, minimise, polish
+from bayeshopf.discrepancy.problem import MAX_NFEV, Problem, charge, minimise, polish
 from bayeshopf.discrepancy.records import (
     CalibratedPairFit,
     CalibratedTermFit,
@@ -80,6 +92,21 @@ __all__ = ["PROFILE_NFEV", "REFIT_FACTOR", "check_off", "fit_parameters", "fit_t
 REFIT_FACTOR = 1.5
 #: Largest number of residual evaluations of a pinned refit.
 PROFILE_NFEV = 10
+
+
+def _coefficients(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, x: np.ndarray,
+                  me, terms: Sequence[Term]) -> CoefficientPosterior:
+    """The terms' Laplace marginal at every τ of non-negligible weight under the model.
+
+    A :class:`~bayeshopf.discrepancy.nested.CoefficientPosterior`, for Savage–Dickey.
+    """
+    keep = np.nonzero(me.weights > 1e-12 * me.weights.max())[0]
+    parts = [gaussian_marginal(*_at_tau(fitter, E, G, ok, TAU[k]), x, len(terms))
+             for k in keep]
+    w = me.weights[keep]
+    return CoefficientPosterior(w / w.sum(), np.array([m for m, _ in parts]),
+                                np.array([C for _, C in parts]),
+                                tuple(t.positive for t in terms))
 
 
 def fit_parameters(fitter: Fitter, unc: Sequence[UncertainParameter], *,
@@ -140,6 +167,26 @@ def _term_problem(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term,
     return prob, x0
 
 
+def _charged(prob, x, ob, E, G, evidence, refined: bool):
+    """The evidence at ``x`` with its linearisation charge paid.
+
+    A refined fit is polished (:func:`~bayeshopf.discrepancy.problem.polish`:
+    the linear step once, where the re-shot orbits confirm it); a screened one
+    pays :func:`~bayeshopf.discrepancy.problem.charge` at ``x``. ``evidence``
+    maps a point to its :class:`~bayeshopf.discrepancy.records.ModelError`.
+
+    Returns:
+        ``(x, ob, E, G, model_error, penalty)`` at the point kept.
+    """
+    me = evidence(x)
+    if refined:
+        x, ob, E, G, penalty = polish(prob, x, ob, E, G, me.median)
+        me = evidence(x)
+    else:
+        penalty = charge(prob, x, ob, E, G, me.median).nats
+    return x, ob, E, G, replace(me, log_z=me.log_z - penalty), penalty
+
+
 def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray, *,
               refined: bool, status: int) -> CalibratedTermFit:
     """Marginal posterior, evidence and diagnostics of the term at ``x``.
@@ -157,12 +204,7 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
                             lambda Et, Gt: _zeta_gaussian(Et, Gt, float(x[d]),
                                                           term.positive)[0])[0]
 
-    me = evidence(x)
-    penalty = 0.0
-    if refined:
-        x, ob, E, G, penalty = polish(prob, x, ob, E, G, me.median)
-        me = evidence(x)
-        me = replace(me, log_z=me.log_z - penalty)
+    x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     zeta = float(x[d])
     keep = np.nonzero(me.weights > 1e-6 * me.weights.max())[0]
     parts = [_zeta_gaussian(*_at_tau(fitter, E, G, ob.ok, TAU[k]), zeta, term.positive)[1:]
@@ -195,7 +237,8 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
         grid=s * grid, density=dens / s, lost=tuple(int(i) for i in np.nonzero(~ob.ok)[0]),
         status=status, refined=refined, orbits=ob, model_error=me,
         column=G[: R * P, d] if not refined else None, x=x, jac=G[: R * P], fitter=fitter,
-        penalty=penalty)
+        penalty=penalty, log_z_laplace=me.log_z,
+        coefficients=_coefficients(fitter, E, G, ob.ok, x, me, (term,)))
 
 
 def screen_term(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term,
@@ -252,7 +295,7 @@ def fit_term(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term, cal:
 
 def _pair_fit(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Term, Term],
               nominal: np.ndarray, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray,
-              *, refined: bool, prob: Problem | None = None) -> CalibratedPairFit:
+              *, refined: bool, prob: Problem) -> CalibratedPairFit:
     d = len(unc)
     pos = [d + k for k, t in enumerate(terms) if t.positive]
 
@@ -260,11 +303,7 @@ def _pair_fit(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Te
         return _model_error(fitter, E, G, ob.ok,
                             lambda Et, Gt: _gauss_evidence(Et, Gt, x, pos))[0]
 
-    me = evidence(x)
-    if refined and prob is not None:
-        x, ob, E, G, penalty = polish(prob, x, ob, E, G, me.median)
-        me = evidence(x)
-        me = replace(me, log_z=me.log_z - penalty)
+    x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     Et, Gt = _at_tau(fitter, E, G, ob.ok, me.median)
     _, delta, cov = laplace_evidence(Et, Gt)
     xm = x + delta
@@ -288,7 +327,8 @@ def _pair_fit(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Te
         p_eff=float(d + 2 - np.trace(cov)), correlation=corr,
         parameters=posteriors(unc, nominal, units, xm[:d], cov[:d, :d]), model_error=me,
         orbits=ob, lost=tuple(int(i) for i in np.nonzero(~ob.ok)[0]), refined=refined, x=x,
-        fitter=fitter)
+        fitter=fitter, penalty=penalty, log_z_laplace=me.log_z,
+        coefficients=_coefficients(fitter, E, G, ob.ok, x, me, terms))
 
 
 def screen_pair(fitter: Fitter, unc: Sequence[UncertainParameter], a: CalibratedTermFit,
@@ -314,9 +354,10 @@ def screen_pair(fitter: Fitter, unc: Sequence[UncertainParameter], a: Calibrated
     G[: R * P, :d] = cal.jac
     G[: R * P, d], G[: R * P, d + 1] = a.column, b.column
     G[R * P:] = np.eye(d + 2)
-    nominal = np.array([fitter.params0[u.name] for u in unc])
-    return _pair_fit(fitter, unc, (a.term, b.term), nominal, x, cal.orbits, E, G,
-                     refined=False)
+    prob = Problem(fitter, unc, (a.term, b.term), [(np.zeros(d + 2), fitter.base),
+                                                    (x, cal.orbits)])
+    return _pair_fit(fitter, unc, (a.term, b.term), prob.nominal, x, cal.orbits, E, G,
+                     refined=False, prob=prob)
 
 
 def screen_second(unc: Sequence[UncertainParameter], first: CalibratedTermFit, term: Term
@@ -340,7 +381,7 @@ def screen_second(unc: Sequence[UncertainParameter], first: CalibratedTermFit, t
                     h0=np.concatenate([np.full(d + 1, 1e-3), [1e-3]]))
     ob, E = prob.solve(x0)
     return _pair_fit(fitter, unc, (first.term, term), prob.nominal, x0, ob, E,
-                     prob.jacobian(x0), refined=False)
+                     prob.jacobian(x0), refined=False, prob=prob)
 
 
 def needs_refit(fitter: Fitter, tau: float) -> bool:

@@ -7,6 +7,7 @@ Both :func:`bayeshopf.discrepancy.analysis.analyse` and
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -59,14 +60,16 @@ def _base_warm_starts(system: System, rs: RecordingSet):
     return diagram, np.stack(x0), np.array(T), note
 
 
-def prepare(recordings: RecordingSet, system: System, K: int = DEFAULT_K, kinds=KINDS
-            ) -> Prepared:
+def prepare(recordings: RecordingSet, system: System, K: int = DEFAULT_K, kinds=KINDS, *,
+            parameters: Sequence[str] = ()) -> Prepared:
     """What every analysis starts from: features, library system and the nominal orbits.
 
     The observed channels are measured with the planar reference first; the
-    library is sized by their median amplitudes and frequency; the library
-    system's orbits at the recordings, every coefficient 0, are shot from the
-    nominal diagram's warm starts.
+    library is sized by their median amplitudes and frequency (and leaves out
+    the terms whose force is that of one of ``parameters``, the calibrated
+    ones: :func:`~bayeshopf.discrepancy.terms.library`); the library system's
+    orbits at the recordings, every coefficient 0, are shot from the nominal
+    diagram's warm starts.
 
     Returns:
         A :class:`Prepared` ``(fitter, diagram, notes)``.
@@ -76,7 +79,8 @@ def prepare(recordings: RecordingSet, system: System, K: int = DEFAULT_K, kinds=
     channels = (ref,) + tuple(c for c in obs if c != ref)
     mf = measure(recordings, channels, K=K)
     amp = dict(zip(channels, np.median(mf.amplitude, axis=0), strict=True))
-    lib = library(system, amp, float(np.median(mf.y[:, 0])), kinds=kinds)
+    lib = library(system, amp, float(np.median(mf.y[:, 0])), kinds=kinds,
+                  parameters=parameters)
     L = library_system(system, lib)
     diagram, x0, T, notes = _base_warm_starts(system, recordings)
     stable = np.array([b == "stable" for b in mf.branch])

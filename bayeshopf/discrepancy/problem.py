@@ -5,7 +5,7 @@ standard normal coordinate :math:`z_j` (:meth:`UncertainParameter.value`:
 :math:`\theta_j = \theta_{0j} e^{\sigma_j z_j}` or :math:`\theta_{0j}(1 + s_j z_j)`),
 and the term's coefficient as :math:`c = s_k\zeta` with the library's prior
 scale :math:`s_k`, so every unknown :math:`x = (z, \zeta)` has a standard normal
-prior (half-normal for a freeplay gap, :math:`\zeta \ge 0`).
+prior (half-normal, :math:`\zeta \ge 0`, for a freeplay gap and a dissipative term).
 
 **Residuals.** With the whitened feature residuals :math:`e(x)` of
 :class:`~bayeshopf.discrepancy.select.Fitter` (sensor offsets profiled out,
@@ -23,8 +23,6 @@ the prior rows :math:`x` being the standard normal priors. The mode is found by
 by forward differences of re-shot orbits (steps a tenth of the current
 posterior standard deviation, as in :mod:`~bayeshopf.discrepancy.select`);
 rows of orbits lost at either end of a difference are zero.
-
-**Recorded orbits must exist.** An orbit that the simulator has at the start
 
 **Recorded orbits must exist.** An orbit that the simulator has at the start
 of a fit (the nominal parameters) but loses at a trial point (its fold moved
@@ -45,6 +43,7 @@ linear model at a fit's end point; the orbits re-shot there must agree.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy import optimize
@@ -55,7 +54,7 @@ from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.discrepancy.terms import Term
 from bayeshopf.simulators.base import UncertainParameter
 
-__all__ = ["BARRIER", "MAX_NFEV", "TOL", "Problem", "minimise", "polish"]
+__all__ = ["BARRIER", "MAX_NFEV", "TOL", "Charge", "Problem", "charge", "minimise", "polish"]
 
 #: Largest number of residual evaluations of one least-squares fit.
 MAX_NFEV = 40
@@ -181,11 +180,8 @@ def minimise(prob: Problem, x0: np.ndarray, max_nfev: int):
     Returns:
         ``(x, orbits, E, G, result)`` at the point found.
     """
-    lower = np.full(prob.n, -np.inf)
-    for k, t in enumerate(prob.terms):
-        if t.positive:
-            lower[prob.d + k] = 0.0
-    res = optimize.least_squares(prob.residual, x0, jac=prob.jacobian, bounds=(lower, np.inf),
+    res = optimize.least_squares(prob.residual, x0, jac=prob.jacobian,
+                                 bounds=(_lower(prob), np.inf),
                                  method="trf", x_scale=1.0, ftol=TOL, xtol=TOL, gtol=TOL,
                                  max_nfev=max_nfev)
     x = res.x
@@ -193,9 +189,89 @@ def minimise(prob: Problem, x0: np.ndarray, max_nfev: int):
     return x, ob, E, prob.jacobian(x), res
 
 
+class Charge(NamedTuple):
+    r"""What :func:`charge` found.
+
+    Attributes:
+        nats: The charge to the log evidence.
+        x: The linear model's mode (clipped to the bounds).
+        orbits: The orbits re-shot there.
+        E: The stacked residuals there.
+        shot: Their misfit :math:`\chi^2_{\rm shot}` at the model error compared.
+        here: The misfit :math:`\chi^2_x` at the point the evidence is formed at.
+        linear: The linear model's misfit :math:`\chi^2_{\rm lin}` at its mode.
+    """
+
+    nats: float
+    x: np.ndarray
+    orbits: OrbitBatch
+    E: np.ndarray
+    shot: float
+    here: float
+    linear: float
+
+
+def _lower(prob: Problem) -> np.ndarray:
+    """Lower bounds of ``x``: 0 for a coefficient constrained to be ≥ 0, else −∞."""
+    lower = np.full(prob.n, -np.inf)
+    for k, t in enumerate(prob.terms):
+        if t.positive:
+            lower[prob.d + k] = 0.0
+    return lower
+
+
+def charge(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray,
+           tau: float) -> Charge:
+    r"""What the Laplace evidence at ``x`` owes for the linearisation it rests on.
+
+    The evidence of the linear model :math:`E + G\delta` at ``x`` (whitened at
+    ``tau``) is :math:`-\tfrac12\chi^2_{\rm lin} - \tfrac12\log\det H`, with
+    :math:`\chi^2_{\rm lin} = \lVert E + G\delta\rVert^2` at the linear model's
+    mode :math:`x + \delta` (clipped to the bounds): it credits the fall from
+    :math:`\chi^2_x = \lVert E\rVert^2` to :math:`\chi^2_{\rm lin}`. The
+    orbits are re-shot at :math:`x + \delta`, giving :math:`\chi^2_{\rm shot}`,
+    and the charge is
+
+    .. math::  \tfrac12\max\big(0,\ \min(\chi^2_{\rm shot}, \chi^2_x)
+               - \chi^2_{\rm lin}\big).
+
+    The misfit promised at the mode is replaced by the lower of the two misfits
+    actually computed on the model, at ``x`` and at :math:`x + \delta`: the
+    evidence becomes that of a Gaussian of precision :math:`H` about the better
+    of the two points, and never falls below the Laplace estimate about ``x``
+    taken as it stands, :math:`-\tfrac12\chi^2_x - \tfrac12\log\det H`, which
+    uses only the misfit checked at ``x``. The charge is thus at most the
+    credit :math:`\tfrac12(\chi^2_x - \chi^2_{\rm lin})` that the linear model
+    gave beyond ``x``. Without the cap, a trial point at which a recorded orbit
+    is lost (its features at :data:`BARRIER`) would be charged
+    :math:`\sim 10^{10}` nats for a step the evidence need not take. A step
+    re-shot better than promised earns nothing extra (charge 0).
+
+    Args:
+        prob: The residuals.
+        x: The point the evidence is formed at.
+        ob: Its orbits.
+        E: The stacked residuals there (whitened with ``prob.fitter``).
+        G: Their Jacobian.
+        tau: The model error at which the misfits are compared.
+
+    Returns:
+        A :class:`Charge`.
+    """
+    fitter = prob.fitter
+    Et, Gt = _at_tau(fitter, E, G, ob.ok, tau)
+    _, delta, _ = laplace_evidence(Et, Gt)
+    xl = np.maximum(x + delta, _lower(prob))
+    pred = float(np.sum((Et + Gt @ (xl - x)) ** 2))
+    ob_l, E_l = prob.solve(xl)
+    El_t, _ = _at_tau(fitter, E_l, np.zeros((E_l.size, 0)), ob_l.ok, tau)
+    shot = float(El_t @ El_t)
+    here = float(Et @ Et)
+    return Charge(0.5 * max(0.0, min(shot, here) - pred), xl, ob_l, E_l, shot, here, pred)
+
 
 def polish(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray,
-            tau: float):
+           tau: float):
     r"""Check the linearisation behind the evidence at a fit's end point, and act on it.
 
     The Laplace evidence credits the step :math:`\delta` to the mode of the linear
@@ -203,32 +279,19 @@ def polish(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.nd
     the orbits re-shot at :math:`x + \delta` agree: where the fit stopped short of
     its mode on a non-smooth or strongly curved posterior (a freeplay gap), the
     linear model can promise a misfit thousands of times lower than the one
-    re-shot. The step is taken (once) when it lowers the re-shot misfit, and the
-    disagreement that remains, :math:`\tfrac12\max(0, \chi^2_{\rm shot} -
-    \chi^2_{\rm linear})` at ``tau``, is returned to be charged to the evidence.
+    re-shot. The step is taken (once) when it lowers the re-shot misfit below
+    that at ``x``, and the disagreement that remains at the point kept is
+    returned, to be charged to the evidence (:func:`charge`: capped at the
+    credit the linear model gave beyond that point).
 
     Returns:
         ``(x, ob, E, G, penalty)`` at the point kept.
     """
-    fitter = prob.fitter
-    lower = np.full(prob.n, -np.inf)
-    for k, t in enumerate(prob.terms):
-        if t.positive:
-            lower[prob.d + k] = 0.0
-    penalty = 0.0
     for it in range(2):
-        Et, Gt = _at_tau(fitter, E, G, ob.ok, tau)
-        _, delta, _ = laplace_evidence(Et, Gt)
-        xl = np.maximum(x + delta, lower)
-        step = xl - x
-        pred = float(np.sum((Et + Gt @ step) ** 2))
-        ob_l, E_l = prob.solve(xl)
-        El_t, _ = _at_tau(fitter, E_l, np.zeros((E_l.size, 0)), ob_l.ok, tau)
-        shot = float(El_t @ El_t)
-        penalty = 0.5 * max(0.0, shot - pred)
-        if it == 0 and shot < float(Et @ Et):
-            x, ob, E = xl, ob_l, E_l
-            G = prob.jacobian(xl)
+        c = charge(prob, x, ob, E, G, tau)
+        if it == 0 and c.shot < c.here:
+            x, ob, E = c.x, c.orbits, c.E
+            G = prob.jacobian(c.x)
             continue
         break
-    return x, ob, E, G, penalty
+    return x, ob, E, G, c.nats

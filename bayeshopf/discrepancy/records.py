@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from bayeshopf.discrepancy.nested import CoefficientPosterior
 from bayeshopf.discrepancy.orbits import OrbitBatch
 from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.discrepancy.terms import Term
@@ -206,8 +207,16 @@ class CalibratedTermFit:
         jac: The data rows of the Jacobian there, shape ``(R·P, d + 1)``.
         fitter: The residuals (their whitening) of this fit.
         penalty: Nats charged to ``log_z`` for the linearisation's disagreement
-            with the re-shot orbits (:func:`~bayeshopf.discrepancy.problem.polish`;
-            refined fits only).
+            with the orbits re-shot at its mode
+            (:func:`~bayeshopf.discrepancy.problem.charge`; screened and refined
+            fits alike).
+        log_z_laplace: The model's own Laplace evidence at its own end point
+            (charge paid); ``log_z`` is the one compared, Savage–Dickey against
+            the nested model where :func:`~bayeshopf.discrepancy.nested.nested_log_z`
+            uses it (``evidence`` says which).
+        coefficients: The Laplace marginal of the term coefficients at every τ
+            (:class:`~bayeshopf.discrepancy.nested.CoefficientPosterior`).
+        evidence: ``"laplace"`` or ``"savage-dickey vs <nested model>"``.
     """
 
     term: Term
@@ -231,6 +240,9 @@ class CalibratedTermFit:
     jac: np.ndarray | None = field(default=None, repr=False)
     fitter: Fitter | None = field(default=None, repr=False)
     penalty: float = 0.0
+    log_z_laplace: float | None = None
+    coefficients: CoefficientPosterior | None = field(default=None, repr=False)
+    evidence: str = "laplace"
 
 
 @dataclass(frozen=True)
@@ -284,6 +296,8 @@ class CalibrationReport:
                        "median": f.median, "ci90": list(f.ci90), "units": f.term.units,
                        "chi2": f.chi2, "log_evidence": f.log_z, "lost": list(f.lost),
                        "separability": f.separability, "refined": f.refined,
+                       "penalty": f.penalty, "evidence": f.evidence,
+                       "log_evidence_laplace": f.log_z_laplace,
                        "parameters_off": [p.name for p in f.parameters if p.off],
                        "parameters": [p.to_json() for p in f.parameters] if f.refined else None}
                       for f in self.terms],
@@ -292,7 +306,8 @@ class CalibrationReport:
                        "ci90": [list(c) for c in f.ci90],
                        "units": [t.units for t in f.terms], "chi2": f.chi2,
                        "log_evidence": f.log_z, "correlation": f.correlation,
-                       "refined": f.refined, "lost": list(f.lost),
+                       "refined": f.refined, "penalty": f.penalty, "lost": list(f.lost),
+                       "evidence": f.evidence, "log_evidence_laplace": f.log_z_laplace,
                        "parameters_off": [p.name for p in f.parameters if p.off]}
                       for f in self.pairs],
             "seconds": dict(self.seconds),
@@ -350,7 +365,8 @@ class CalibratedPairFit:
     Attributes:
         terms: The two terms.
         medians: Posterior medians of their coefficients (normal marginals of
-            the linearised model at the median of τ, truncated at 0 for a gap).
+            the linearised model at the median of τ, truncated at 0 for a gap or
+            a dissipative term).
         ci90: Their 5% and 95% quantiles.
         log_z: Log evidence, τ integrated out.
         chi2: Misfit of the data rows (at the mode when refined, else of the
@@ -365,6 +381,10 @@ class CalibratedPairFit:
         refined: Whether fitted in full or only screened.
         x: The point the linearisation is about.
         fitter: The residuals (their whitening) of this fit.
+        penalty: As :attr:`CalibratedTermFit.penalty`.
+        log_z_laplace: As :attr:`CalibratedTermFit.log_z_laplace`.
+        coefficients: As :attr:`CalibratedTermFit.coefficients` (both terms).
+        evidence: As :attr:`CalibratedTermFit.evidence`.
     """
 
     terms: tuple[Term, Term]
@@ -381,6 +401,10 @@ class CalibratedPairFit:
     refined: bool = False
     x: np.ndarray | None = field(default=None, repr=False)
     fitter: Fitter | None = field(default=None, repr=False)
+    penalty: float = 0.0
+    log_z_laplace: float | None = None
+    coefficients: CoefficientPosterior | None = field(default=None, repr=False)
+    evidence: str = "laplace"
 
     @property
     def name(self) -> str:

@@ -154,6 +154,28 @@ def stage_rows(d: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
     return titles, rows
 
 
+def _bayes_markdown(v: dict) -> list[str]:
+    """Bayes factors of the classes apart from the prior odds, and the prior-scale band."""
+    bf = v.get("bayes_factors")
+    if not bf:
+        return []
+    lines = ["", "## Bayes factors (apart from the prior odds)", "",
+             "| class | prior probability | log B against nothing wrong | "
+             "log B against parameters off |", "|---|---:|---:|---:|"]
+    for c, row in bf["log_bayes_factor"].items():
+        cells = [f"{row[o]:.1f}" if o in row else "–" for o in ("none", "parameters off")]
+        lines.append(f"| {c} | {bf['prior'][c]:.3g} | " + " | ".join(cells) + " |")
+    bands = v.get("prior_sensitivity") or []
+    lines += [""] if bands else []
+    for b in bands:
+        vals = [b["log_bayes_factor"], *b["scales"].values()]
+        fs = [float(k) for k in b["scales"]]
+        lines.append(f"* {b['model']} against parameters off: log B "
+                     f"{b['log_bayes_factor']:.1f} [{min(vals):.1f}, {max(vals):.1f}] over "
+                     f"prior scales ×{min(fs):g}–×{max(fs):g} ({b['evidence']})")
+    return lines
+
+
 def _markdown_calibrated(d: dict) -> str:
     """``report.md`` of an analysis with calibration."""
     v = d["verdict"]
@@ -187,6 +209,7 @@ def _markdown_calibrated(d: dict) -> str:
             lines.append(f"| {m['label']}{'' if m['refined'] else ' (screened)'} | "
                          f"{m['probability']:.3g} | {m['log_evidence']:.1f} | {co['median']:.4g} | "
                          f"{co['ci90'][0]:.4g} – {co['ci90'][1]:.4g} | {co['units']} |")
+    lines += _bayes_markdown(v)
     titles, rows = stage_rows(d)
     lines += ["", "## Fit: " + ", ".join(titles), "",
               "| quantity | " + " | ".join(titles) + " |",

@@ -33,7 +33,9 @@ An orbit that the simulator with the term does not have at a recording's μ
 :data:`LOST_CHI2` per feature, and is listed.
 
 **Posterior of each term.** :math:`c \sim \mathcal N(0, s_k^2)`
-(half-normal for a freeplay gap) with the library's prior scale. The mode is
+(half-normal, :math:`c \ge 0`, for a freeplay gap and the dissipative terms:
+:meth:`~bayeshopf.discrepancy.terms.Term.log_prior`) with the library's prior
+scale. The mode is
 found by Gauss–Newton on the whitened residuals with the orbits re-shot at
 every iterate (homotopy from the previous one) and forward-difference
 sensitivities; then the features are linearised at the mode and the 1-D
@@ -244,10 +246,7 @@ class Fitter:
         grid = np.linspace(lo, max(c + 6 * sd, lo + 12 * sd), GRID)
         # linearised residuals on the grid
         ll = np.array([-0.5 * np.sum((e + g * (x - c)) ** 2) for x in grid])
-        lprior = -0.5 * grid**2 / s**2 - 0.5 * np.log(2 * np.pi * s**2)
-        if term.positive:
-            lprior = lprior + np.log(2.0)
-        lp = ll + lprior
+        lp = ll + term.log_prior(grid)
         mx = lp.max()
         dens = np.exp(lp - mx)
         area = np.sum(0.5 * (dens[1:] + dens[:-1]) * np.diff(grid))

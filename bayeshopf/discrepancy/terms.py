@@ -6,7 +6,13 @@ coefficient :math:`c`; the system integrates
 :math:`M\ddot q + D\dot q + Kq + N(q) = F_{\text{extra}}`
 (:meth:`~bayeshopf.simulators.System.with_extra_force`). **Sign convention:**
 the terms model restoring and dissipative forces that the simulator lacks, so
-a positive coefficient *adds* to the restoring or damping force:
+a positive coefficient *adds* to the restoring or damping force. The
+dissipative terms (Coulomb friction, quadratic and cubic damping) model
+damping the simulator lacks, and their coefficient is restricted to
+:math:`c \ge 0` (:attr:`Term.positive`, :data:`DISSIPATIVE`): a negative one
+would feed energy into the motion, which is not a missing friction or damper
+but an unmodelled source (an aerodynamic effect), and naming it "damping" would
+mislead. A stiffness coefficient may have either sign (hardening or softening).
 
 =====================  ==========================================  =================
 kind                   :math:`F_{\text{extra}}`                    coefficient unit
@@ -40,10 +46,22 @@ A wrong value of a term the simulator already has is that term: the aerofoil's
 :math:`k_{\alpha3}\alpha^3` and the added :math:`c\,\alpha^3` sum, so an error
 :math:`\Delta k_{\alpha3}` is ``alpha_cubic_stiffness`` with :math:`c = \Delta k_{\alpha3}`.
 
-**Prior scale.** Each coefficient gets a zero-mean normal prior (half-normal
-for the gap) whose scale :math:`s` makes the term's force at the typical
-amplitude 20% of the linear restoring force there, :math:`k_q A_q`:
-:math:`|F(s; A_q, V_q)| = 0.2\,k_q A_q`, e.g. :math:`s = 0.2\,k_q/A_q^2` for
+**Terms that are parameters.** When such a parameter is among those
+calibrated (``parameters`` of :func:`library`), the term would only be a
+wider prior on it filed under "term missing", so it is left out of the
+candidates and recorded in :attr:`Library.skipped` ("the same force as
+parameter k_alpha3"). The test is numerical, not by name
+(:func:`same_force_as`): on :data:`N_STATES` random states and values of μ, the
+term's contribution to the state derivative, :math:`B(x)\,e_q\,
+\partial F/\partial c|_{c=0}`, is compared with :math:`\partial\dot x/\partial\theta`
+for each calibrated :math:`\theta`; the term is that parameter when a least-squares
+multiple of one fits the other to a relative residual below :data:`SAME_FORCE_TOL`.
+
+**Prior scale.** Each coefficient gets a zero-mean normal prior (half-normal,
+:math:`p(c) = 2\,\mathcal N(c; 0, s^2)` on :math:`c \ge 0`, for the gap and the
+dissipative terms: :meth:`Term.log_prior`) whose scale :math:`s` makes the
+term's force at the typical amplitude 20% of the linear restoring force there,
+:math:`k_q A_q`: :math:`|F(s; A_q, V_q)| = 0.2\,k_q A_q`, e.g. :math:`s = 0.2\,k_q/A_q^2` for
 cubic stiffness, :math:`s = 0.2\,k_q A_q/V_q^3` for cubic damping,
 :math:`s = 0.2\,A_q` for the freeplay gap. A missing term larger than that
 would be a gross modelling error, not a hidden one; a much wider prior would
@@ -56,7 +74,7 @@ coordinate one could add a spring to).
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import jax
@@ -67,17 +85,25 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 
-__all__ = ["KINDS", "Library", "Term", "library", "library_system", "term_force"]
+__all__ = ["DISSIPATIVE", "KINDS", "Library", "Term", "library", "library_system",
+           "same_force_as", "term_force"]
 
 #: The kinds of term, in the order they are listed.
 KINDS: tuple[str, ...] = (
     "quadratic_stiffness", "cubic_stiffness", "quintic_stiffness", "freeplay",
     "coulomb_friction", "quadratic_damping", "cubic_damping",
 )
+#: The kinds whose coefficient is restricted to c ≥ 0 (half-normal prior): the freeplay
+#: gap and the dissipative terms.
+DISSIPATIVE: tuple[str, ...] = ("coulomb_friction", "quadratic_damping", "cubic_damping")
 #: Fraction of the linear restoring force that a term of one prior scale gives.
 PRIOR_FRACTION = 0.2
 #: Smoothing widths relative to the typical amplitudes.
 SMOOTHING = 1e-2
+#: Random states on which a term's force is compared with a parameter's (:func:`same_force_as`).
+N_STATES = 8
+#: Relative least-squares residual below which a term's force is a parameter's.
+SAME_FORCE_TOL = 1e-8
 
 _PLAIN = {"quadratic_stiffness": "quadratic stiffness", "cubic_stiffness": "cubic stiffness",
           "quintic_stiffness": "quintic stiffness", "freeplay": "freeplay",
@@ -122,8 +148,21 @@ class Term:
 
     @property
     def positive(self) -> bool:
-        """Whether the coefficient is constrained to be ≥ 0 (the freeplay gap)."""
-        return self.kind == "freeplay"
+        """Whether the coefficient is constrained to be ≥ 0 (the gap; dissipative terms)."""
+        return self.kind == "freeplay" or self.kind in DISSIPATIVE
+
+    def log_prior(self, c):
+        r"""Log prior density of the coefficient ``c`` (in the term's unit).
+
+        :math:`\log\mathcal N(c; 0, s^2)`; when :attr:`positive`, the half-normal
+        :math:`\log 2 + \log\mathcal N(c; 0, s^2)` on :math:`c \ge 0` and
+        :math:`-\infty` below.
+        """
+        c = np.asarray(c, float)
+        lp = -0.5 * (c / self.scale) ** 2 - 0.5 * np.log(2 * np.pi * self.scale**2)
+        if self.positive:
+            lp = np.where(c >= 0, lp + np.log(2.0), -np.inf)
+        return lp
 
     @property
     def plain(self) -> str:
@@ -193,15 +232,19 @@ class Library:
     Attributes:
         terms: The terms, by coordinate then kind.
         skipped: ``name -> reason`` for terms left out (freeplay without a
-            known linear stiffness).
+            known linear stiffness; a term whose force is that of a calibrated
+            parameter).
         amplitude: Typical displacement amplitude :math:`A_q` per coordinate.
         velocity: Typical velocity amplitude :math:`V_q` per coordinate.
+        duplicates: ``(term, parameter)`` for each term left out because its
+            force is that of a calibrated parameter (:func:`same_force_as`).
     """
 
     terms: tuple[Term, ...]
     skipped: Mapping[str, str] = field(default_factory=dict)
     amplitude: Mapping[str, float] = field(default_factory=dict)
     velocity: Mapping[str, float] = field(default_factory=dict)
+    duplicates: tuple[tuple[Term, str], ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -238,8 +281,77 @@ def _linear_stiffness(system: System, coord: str) -> float:
     return float(-J[vel, pos] / b) if b != 0 else float("nan")
 
 
+def _unit_force(t: Term, q, qd, c):
+    return term_force(t.kind, q, qd, c, t.stiffness, t.eps)
+
+
+def same_force_as(system: System, terms: Sequence[Term], parameters: Sequence[str],
+                  amplitude: Mapping[str, float], velocity: Mapping[str, float], *,
+                  seed: int = 0) -> dict[str, str]:
+    r"""The terms whose force is a multiple of a parameter's: ``term name -> parameter``.
+
+    On :data:`N_STATES` states drawn at random (displacement and velocity of
+    each coordinate normal with standard deviations :math:`A_q`, :math:`V_q`;
+    every other state with 0.1) and values of μ uniform on ``system.mu_range``,
+    the stacked vectors :math:`a_\theta = \partial\dot x/\partial\theta` and
+    :math:`b = B(x)\,e_q\,\partial F/\partial c|_{c=0}` are compared: the term is
+    parameter :math:`\theta` when
+    :math:`\min_\lambda\lVert a_\theta - \lambda b\rVert <` :data:`SAME_FORCE_TOL`
+    :math:`\cdot\lVert a_\theta\rVert`.
+
+    Args:
+        system: The simulator (with ``force_input``).
+        terms: The candidate terms.
+        parameters: Names of the parameters to compare with (the calibrated ones).
+        amplitude: :math:`A_q` per coordinate.
+        velocity: :math:`V_q` per coordinate.
+        seed: Seed of the random states.
+    """
+    names = [n for n in parameters if n in system.params]
+    if not names or not terms:
+        return {}
+    rng = np.random.default_rng(seed)
+    sd = np.full(system.n_states, 0.1)
+    for c, A in amplitude.items():
+        pos = system.state_names.index(c)
+        vel = (system.state_names.index(f"{c}_dot") if f"{c}_dot" in system.state_names
+               else pos + 1)
+        sd[pos], sd[vel] = A, velocity[c]
+    xs = jnp.asarray(rng.normal(size=(N_STATES, system.n_states)) * sd)
+    mus = jnp.asarray(rng.uniform(*system.mu_range, size=N_STATES))
+    p0 = system.param_tree()
+    theta0 = jnp.stack([p0[n] for n in names])
+
+    def rhs_theta(theta, x, mu):
+        return system.rhs(x, mu, {**p0, **dict(zip(names, theta, strict=True))})
+
+    # ∂ẋ/∂θ at every state: (N_STATES, n_states, n_parameters)
+    A = np.asarray(jax.vmap(jax.jacfwd(rhs_theta), in_axes=(None, 0, 0))(theta0, xs, mus))
+    B = np.asarray(jax.vmap(system.force_input, in_axes=(0, 0, None))(xs, mus, p0))
+    out = {}
+    for t in terms:
+        pos = system.state_names.index(t.coordinate)
+        vel = (system.state_names.index(f"{t.coordinate}_dot")
+               if f"{t.coordinate}_dot" in system.state_names else pos + 1)
+        dF = np.asarray(jax.jacfwd(functools.partial(_unit_force, t, xs[:, pos], xs[:, vel]))(
+            jnp.asarray(0.0)))
+        b = (B[:, :, t.index] * dF[:, None]).ravel()
+        if not np.any(b):
+            continue
+        for j, n in enumerate(names):
+            a = A[:, :, j].ravel()
+            na = float(np.linalg.norm(a))
+            if na == 0.0:
+                continue
+            lam = float(a @ b) / float(b @ b)
+            if np.linalg.norm(a - lam * b) < SAME_FORCE_TOL * na:
+                out[t.name] = n
+                break
+    return out
+
+
 def library(system: System, amplitude: Mapping[str, float], frequency_hz: float, *,
-            kinds: tuple[str, ...] = KINDS) -> Library:
+            kinds: tuple[str, ...] = KINDS, parameters: Sequence[str] = ()) -> Library:
     r"""The candidate terms for ``system``'s observed mechanical coordinates.
 
     Args:
@@ -248,6 +360,9 @@ def library(system: System, amplitude: Mapping[str, float], frequency_hz: float,
             coordinate, :math:`A_q`.
         frequency_hz: Typical oscillation frequency; :math:`V_q = 2\pi f A_q`.
         kinds: The kinds to include.
+        parameters: The parameters that are calibrated: a term whose force is
+            one of theirs (:func:`same_force_as`) is left out and recorded in
+            :attr:`Library.skipped` (module docstring, "Terms that are parameters").
 
     Raises:
         TermError: If the system declares no extra-force input or no observed
@@ -286,10 +401,16 @@ def library(system: System, amplitude: Mapping[str, float], frequency_hz: float,
                               scale=_scale(kind, kk, A, V),
                               stiffness=kk if kind == "freeplay" else 0.0, eps=eps,
                               index=system.coordinates.index(c)))
+    same = same_force_as(system, terms, parameters, A_out, V_out)
+    for name, par in same.items():
+        skipped[name] = (f"the same force as parameter {par}, which is calibrated (an error "
+                         f"in it is named as {par} off)")
+    duplicates = tuple((t, same[t.name]) for t in terms if t.name in same)
+    terms = [t for t in terms if t.name not in skipped]
     if not terms:
         raise TermError(f"{system.name}: candidate terms expected; found none ("
                         + "; ".join(sorted(set(skipped.values()))) + ")")
-    return Library(tuple(terms), skipped, A_out, V_out)
+    return Library(tuple(terms), skipped, A_out, V_out, duplicates)
 
 
 def library_params(lib: Library) -> dict[str, float]:

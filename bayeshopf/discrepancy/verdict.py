@@ -13,7 +13,20 @@ the misfit at that :math:`\tau`) and reported with the verdict. The verdict is
 :data:`~bayeshopf.discrepancy.select.TIE_FACTOR` of the best one in
 probability are named with it: the data cannot tell them apart
 (``verdict["indistinguishable"]``), whether they are two terms, a term and a
-pair, or a term and a recalibration of the parameters.
+pair, or a term and a recalibration of the parameters. A parameter named off
+whose force is that of a library term left out of the candidates
+(:attr:`~bayeshopf.discrepancy.terms.Library.duplicates`: ``k_alpha3`` and
+``alpha_cubic_stiffness``) is named with it ("equivalently: cubic stiffness in
+pitch"; ``verdict["equivalent_terms"]``).
+
+**Bayes factors** (:func:`with_bayes_factors`). Beside the class
+probabilities the verdict gives each class's log Bayes factor against
+"nothing wrong" and against "parameters off" and the prior probabilities used
+(``verdict["bayes_factors"]``), and for the most probable terms the log Bayes
+factor against "parameters off" with every term's prior scale halved and
+doubled (``verdict["prior_sensitivity"]``;
+:mod:`~bayeshopf.discrepancy.nested`). Where that band crosses 0 for the
+model the verdict rests on, the sentence says the prior scales decide it.
 """
 
 from __future__ import annotations
@@ -38,7 +51,8 @@ from bayeshopf.discrepancy.select import TIE_FACTOR, Fitter
 from bayeshopf.discrepancy.terms import Library
 from bayeshopf.simulators.base import System
 
-__all__ = ["EXPLAINED_FACTOR", "MIN_MODEL_ERROR", "build_verdict", "located"]
+__all__ = ["EXPLAINED_FACTOR", "MIN_MODEL_ERROR", "band_words", "build_verdict", "located",
+           "with_bayes_factors"]
 
 #: A model error whose 90% interval lies above this (0.1% of the amplitude) remains: a
 #: reporting threshold, not part of the evidence, above the agreement of the feature
@@ -48,9 +62,11 @@ MIN_MODEL_ERROR = 1e-3
 EXPLAINED_FACTOR = 0.5
 
 
-def _pct(p: ParameterPosterior) -> str:
+def _pct(p: ParameterPosterior, lib: Library | None = None) -> str:
     lo, hi = (100 * (v / p.nominal - 1) for v in p.ci90)
-    return f"{p.name} {100 * p.shift:+.1f}% (90% {lo:+.1f}% to {hi:+.1f}%)"
+    same = [t.plain for t, par in (lib.duplicates if lib is not None else ()) if par == p.name]
+    return (f"{p.name} {100 * p.shift:+.1f}% (90% {lo:+.1f}% to {hi:+.1f}%"
+            + (f"; equivalently: {' or '.join(same)}" if same else "") + ")")
 
 
 def located(fitter: Fitter, e: np.ndarray, tau: float, ok: np.ndarray, n: int = 2
@@ -140,7 +156,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
         sentence = ("The simulator with its nominal parameters matches the recordings within "
                     f"their noise (model error {err(me0)} of the orbit amplitude).")
     elif kind == KIND_PARAMS:
-        what = "; ".join(_pct(p) for p in off) if off else \
+        what = "; ".join(_pct(p, lib) for p in off) if off else \
             "jointly, no single one outside its 90% interval"
         sentence = (f"The simulator's parameters are off: {what}. Calibrated, its model error "
                     f"goes from {err(me0)} to {err(cal.model_error)} of the orbit amplitude."
@@ -165,7 +181,8 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                         f"{f0.median:.3g}{u} (90% interval {f0.ci90[0]:.3g} to "
                         f"{f0.ci90[1]:.3g})")
         off = [p for p in params_after if p.off]
-        sentence += ((f"; parameters off: {'; '.join(_pct(p) for p in off)}" if off else "")
+        sentence += ((f"; parameters off: {'; '.join(_pct(p, lib) for p in off)}" if off
+                      else "")
                      + f". Model error {err(me0)} → {err(me_best)} of the orbit amplitude.")
     else:
         best_words = (best_model if best_model in ("none", "parameters")
@@ -186,7 +203,57 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
     return {"kind": kind, "probability": classes[best_class], "model": best_model,
             "parameters": [p.name for p in off] if kind in (KIND_PARAMS, KIND_TERM) else [],
             "terms": named_terms, "pair": len(named_terms) == 2,
+            "equivalent_terms": {p.name: t.name for p in off for t, par in lib.duplicates
+                                 if par == p.name and kind in (KIND_PARAMS, KIND_TERM)},
             "indistinguishable": rivals,
             "model_error": {"nominal": me0.to_json(), "final": me_best.to_json()},
             "remaining": {"significant": remains, "where": where},
             "sentence": sentence}
+
+
+def band_words(b: Mapping) -> str:
+    """``"log B 12.3 [10.1, 13.0] over prior scales ×0.5–×2"`` of a ``prior_sensitivity`` row."""
+    vals = [b["log_bayes_factor"], *b["scales"].values()]
+    fs = [float(k) for k in b["scales"]]
+    return (f"log B {b['log_bayes_factor']:.1f} [{min(vals):.1f}, {max(vals):.1f}] over "
+            f"prior scales ×{min(fs):g}–×{max(fs):g}")
+
+
+def with_bayes_factors(verdict: Mapping, bayes: Mapping, bands: Sequence[Mapping]) -> dict:
+    """The verdict with its Bayes factors, prior odds and prior-scale band (module docstring).
+
+    Args:
+        verdict: :func:`build_verdict`'s.
+        bayes: :func:`~bayeshopf.discrepancy.nested.class_bayes_factors`' (class names
+            :data:`~bayeshopf.discrepancy.records.KIND_NONE` etc.).
+        bands: Per model: ``model``, ``label``, ``evidence``, ``log_bayes_factor`` (against
+            "parameters off") and ``scales`` (the same with every prior scale
+            multiplied by each factor).
+
+    Returns:
+        A copy with ``bayes_factors`` (``prior``, ``log_evidence`` and
+        ``log_bayes_factor`` of each class against ``"none"`` and
+        ``"parameters off"``) and ``prior_sensitivity``; the sentence extended.
+    """
+    v = dict(verdict)
+    lb = bayes["log_bayes_factor"]
+    v["bayes_factors"] = {
+        "prior": dict(bayes["prior"]), "log_evidence": dict(bayes["log_evidence"]),
+        "log_bayes_factor": {c: {o: lb[c][o] for o in (KIND_NONE, KIND_PARAMS) if o in lb[c]}
+                             for c in lb}}
+    v["prior_sensitivity"] = [dict(b) for b in bands]
+    if KIND_TERM not in lb or KIND_PARAMS not in lb:
+        return v
+    words = (f" Apart from the prior odds ({bayes['prior'][KIND_TERM]:.2g} against "
+             f"{bayes['prior'][KIND_PARAMS]:.2g}), the log Bayes factor of a missing term "
+             f"against parameters off is {lb[KIND_TERM][KIND_PARAMS]:.1f}")
+    model = v["model"] if v["kind"] == KIND_TERM else None
+    row = next((b for b in bands if b["model"] == model), bands[0] if bands else None)
+    if row is not None:
+        words += f"; {row.get('label', row['model'])}: {band_words(row)}"
+        vals = [row["log_bayes_factor"], *row["scales"].values()]
+        if min(vals) < 0 < max(vals):
+            words += (". Whether this term is missing rests on the terms' prior scales, "
+                      "not on the data alone")
+    v["sentence"] = v["sentence"] + words + "."
+    return v

@@ -4,8 +4,9 @@
 :mod:`~bayeshopf.model.spec` (the model's structure and the LCO radius),
 :mod:`~bayeshopf.model.marginal` (the collapsed Gaussian),
 :mod:`~bayeshopf.model.frequency` (the phase speed),
-:mod:`~bayeshopf.model.discrepancy` (the model discrepancy) and
-:mod:`~bayeshopf.model.collapsed` (the NumPyro model, which re-exports the others' names).
+:mod:`~bayeshopf.model.discrepancy` (the model discrepancy),
+:mod:`~bayeshopf.model.collapsed` (the NumPyro model, which re-exports the others' names) and
+:mod:`~bayeshopf.model.prior_predictive` (data sets drawn from its prior).
 """
 
 

@@ -1,0 +1,254 @@
+"""Simulation-based calibration of the collapsed model with the discrepancy (issue 51, item 3).
+
+    python benchmarks/bench_sbc.py --design paired --seeds 0-199
+    python benchmarks/bench_sbc.py --design sweep --seeds 0-199
+    python benchmarks/bench_sbc.py --summary        # table and rank histograms
+
+Each simulation draws a data set from the model's prior
+(:func:`bayeshopf.model.prior_predictive.draw_data`) at one design, fits it with
+NUTS on the collapsed model (the map and the discrepancy's latents integrated
+out), and ranks the truth of μ0, the fold, η (and the other sampled sites)
+among ``L = 99`` thinned posterior draws (Talts et al. 2018): exact inference
+gives uniform ranks.
+
+Designs (the demo's recordings, ``flutter_experiment(seed=0)``, give μ, the
+branches, the standard errors and the model's data constants ρ, q, the frame):
+
+* ``paired``: all 8 recordings, 4 stable and 4 unstable (up to 18.0 m/s, the
+  Hopf point's side);
+* ``sweep``: the 4 stable recordings and the 2 lowest unstable ones (15.1 and
+  16.2 m/s): no unstable recording near the Hopf point.
+
+The model is the default's structure with the discrepancy, the curved
+unfolding and the frequency model, no control term. NUTS is NumPyro's kernel
+(``numpyro.infer.hmc.hmc``), with the data as traced arguments (one
+compilation per design): 2 chains of
+``--warmup`` + ``--samples`` steps from the package's deterministic start, a
+dense mass matrix, target acceptance 0.8, as the package's default.
+
+Writes one JSON line per simulation to ``benchmarks/results/sbc_<design>.jsonl``
+(appended, so that a run can be stopped and resumed); ``--summary`` reads them,
+writes ``benchmarks/sbc.json`` (the table ``docs/model_discrepancy.md`` quotes)
+and ``docs/sbc_ranks.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from _common import RESULTS_DIR, atomic_write, exit_on_help
+
+exit_on_help(__doc__)
+
+import numpy as np  # noqa: E402
+
+#: Thinned posterior draws per simulation (ranks 0..L, L + 1 = 100 values).
+L_DRAWS = 99
+#: Histogram bins of the ranks (5 rank values each).
+BINS = 20
+#: Sites whose ranks are recorded.
+SITES = ("mu0", "mu_fold", "eta", "ell", "gap_hopf", "gap_fold", "w_unfold", "sigma_rel",
+         "tau_mu", "tau_shape")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def design(name: str):
+    """``(spec, mu, sign, se, omega_se)`` of a design (module docstring)."""
+    from bayeshopf.features.harmonics import extract_harmonics
+    from bayeshopf.inference.settings import build_spec
+    from bayeshopf.simulators.truth import flutter_experiment
+
+    rs, _ = flutter_experiment(seed=0)
+    f = extract_harmonics(rs)
+    if name == "paired":
+        keep = np.ones(f.mu.shape, bool)
+    elif name == "sweep":
+        keep = ~f.unstable | (f.mu < 16.5)
+    else:
+        raise SystemExit(f"--design: 'paired' or 'sweep' expected; got {name!r}")
+    f = f.subset(np.flatnonzero(keep))
+    spec = build_spec(f, "subcritical", control=False, discrepancy=True)
+    sign = np.where(f.unstable, -1.0, 1.0)
+    return spec, f.mu, sign, f.coeffs_se, f.omega_se
+
+
+def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
+    """NUTS on new data of the design's shape, compiled once (data as traced arguments).
+
+    NumPyro's functional NUTS (``numpyro.infer.hmc.hmc``): the kernel the
+    ``MCMC`` class runs, with its step-size and dense mass-matrix adaptation,
+    from the package's deterministic start; each chain one compiled call
+    (``MCMC.run`` compiles its loop anew on every call, and a process that
+    fitted some sixty data sets that way ran out of memory maps).
+    """
+    import jax
+    import jax.numpy as jnp
+    from numpyro.infer import init_to_value
+    from numpyro.infer.hmc import hmc
+    from numpyro.infer.util import initialize_model
+
+    from bayeshopf.inference.programs import _initial_values
+    from bayeshopf.model import collapsed as cm
+
+    def model(mu, sign, coeffs, coeffs_se, omega, omega_se):
+        cm.collapsed_model(spec, mu, sign, coeffs, coeffs_se, omega, omega_se)
+
+    shape = (len(mu), 2, 2 * spec.n_harmonics + 1)
+    example = (jnp.asarray(mu), jnp.asarray(sign), jnp.zeros(shape), jnp.asarray(se),
+               jnp.full(len(mu), spec.omega_centre), jnp.asarray(omega_se))
+    info = initialize_model(jax.random.PRNGKey(0), model, model_args=example,
+                            init_strategy=init_to_value(values=_initial_values(spec)),
+                            dynamic_args=True, validate_grad=False)
+    z0 = info.param_info.z
+    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+    post = info.postprocess_fn(*example)       # the sites' transforms do not read the data
+
+    @jax.jit
+    def chain(key, data):
+        state = init_kernel(z0, warmup, dense_mass=True, target_accept_prob=0.8,
+                            model_args=data, rng_key=key)
+
+        def step(s, _):
+            s = sample_kernel(s, model_args=data)
+            return s, (s.z, s.diverging)
+
+        _, (zs, div) = jax.lax.scan(step, state, None, length=warmup + samples)
+        zs = jax.tree.map(lambda a: a[warmup:], zs)
+        return jax.vmap(post)(zs), jnp.sum(div[warmup:])
+
+    def run(key, *data):
+        data = tuple(jnp.asarray(a) for a in data)
+        outs = [chain(k, data) for k in jax.random.split(key, 2)]
+        chains = {k: np.stack([np.asarray(o[0][k]) for o in outs]) for k in outs[0][0]}
+        return chains, int(sum(int(o[1]) for o in outs))
+
+    return run
+
+
+def one(seed: int, spec, mu, sign, se, omega_se, run) -> dict:
+    import jax
+
+    from bayeshopf.inference.nuts import rhat_ess
+    from bayeshopf.model.prior_predictive import draw_data
+
+    d = draw_data(spec, mu, sign, se, jax.random.PRNGKey(seed), omega_se=omega_se)
+    t0 = time.perf_counter()
+    chains, div = run(jax.random.PRNGKey(10**6 + seed), mu, sign, d.coeffs, se, d.omega, omega_se)
+    wall = time.perf_counter() - t0
+    pooled = {k: np.asarray(v).reshape(-1) for k, v in chains.items() if k in SITES}
+    n = next(iter(pooled.values())).size
+    pick = np.linspace(0, n - 1, L_DRAWS).round().astype(int)
+    ranks = {k: int(np.sum(v[pick] < float(d.theta[k]))) for k, v in pooled.items()}
+    conv = rhat_ess({k: np.asarray(v) for k, v in chains.items() if k in SITES})
+    rhat = max(r for r, _ in conv.values())
+    ess = min(e for _, e in conv.values())
+    return {"seed": seed, "ranks": ranks, "truth": {k: float(d.theta[k]) for k in pooled},
+            "divergences": div, "rhat_max": rhat, "ess_min": ess, "wall_s": wall}
+
+
+def parse_seeds(s: str) -> list[int]:
+    a, _, b = s.partition("-")
+    return list(range(int(a), int(b or a) + 1))
+
+
+def run_design(name: str, seeds: list[int], warmup: int, samples: int) -> None:
+    from bayeshopf._x64 import ensure_x64
+
+    ensure_x64()
+    spec, mu, sign, se, omega_se = design(name)
+    run = make_runner(spec, mu, sign, se, omega_se, warmup, samples)
+    out = RESULTS_DIR / f"sbc_{name}.jsonl"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = set()
+    if out.exists():
+        done = {json.loads(line)["seed"] for line in out.read_text().splitlines() if line}
+    for seed in seeds:
+        if seed in done:
+            continue
+        rec = one(seed, spec, mu, sign, se, omega_se, run)
+        rec.update(design=name, warmup=warmup, samples=samples)
+        with out.open("a") as fh:
+            fh.write(json.dumps(rec) + "\n")
+        print(f"sbc {name}: seed {seed}: ranks mu0 {rec['ranks']['mu0']} fold "
+              f"{rec['ranks']['mu_fold']} eta {rec['ranks']['eta']}; R̂ {rec['rhat_max']:.3f}, "
+              f"{rec['divergences']} divergent, {rec['wall_s']:.1f} s", file=sys.stderr, flush=True)
+
+
+def summary(seeds: list[int]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    table = {}
+    shown = ("mu0", "mu_fold", "eta")
+    fig, axes = plt.subplots(2, len(shown), figsize=(10, 5.5), sharey=True)
+    for r, name in enumerate(("paired", "sweep")):
+        path = RESULTS_DIR / f"sbc_{name}.jsonl"
+        recs = [json.loads(x) for x in path.read_text().splitlines() if x] if path.exists() else []
+        recs = [x for x in recs if x["seed"] in set(seeds)]
+        if not recs:
+            continue
+        seen = [x["seed"] for x in recs]
+        row = {"n": len(recs), "seeds": [min(seen), max(seen)],
+               "rhat_above_1.01": sum(x["rhat_max"] > 1.01 for x in recs),
+               "with_divergences": sum(x["divergences"] > 0 for x in recs),
+               "median_wall_s": float(np.median([x["wall_s"] for x in recs])), "sites": {}}
+        for site in SITES:
+            ranks = np.array([x["ranks"][site] for x in recs if site in x["ranks"]])
+            counts = np.bincount(ranks * BINS // (L_DRAWS + 1), minlength=BINS)
+            p = float(stats.chisquare(counts).pvalue)
+            row["sites"][site] = {"chi2_p": p, "counts": counts.tolist(),
+                                  "mean_rank_fraction": float(np.mean(ranks) / L_DRAWS)}
+        table[name] = row
+        for c, site in enumerate(shown):
+            ax = axes[r, c]
+            s = row["sites"][site]
+            ax.bar(np.arange(BINS), s["counts"], width=1.0, align="edge", color="C0",
+                   edgecolor="white")
+            ax.set_xlim(0, BINS)
+            lo, hi = stats.binom.ppf([0.005, 0.995], row["n"], 1.0 / BINS)
+            ax.axhspan(lo, hi, color="0.85", zorder=0)
+            ax.axhline(row["n"] / BINS, color="k", lw=0.8)
+            label = {"mu0": "μ0 (Hopf)", "mu_fold": "fold", "eta": "η"}[site]
+            ax.set_title(f"{name}: {label}  (χ² p = {s['chi2_p']:.2f})", fontsize=9)
+            ax.set_xticks([0, BINS // 2, BINS])
+            ax.set_xticklabels(["0", "0.5", "1"])
+            if r == 1:
+                ax.set_xlabel("rank of the truth among the draws")
+        axes[r, 0].set_ylabel(f"simulations (of {row['n']})")
+    fig.suptitle("Simulation-based calibration: ranks of the truth (grey: 99% band of a "
+                 "uniform bin)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "sbc_ranks.png", dpi=110)
+    atomic_write(Path(__file__).with_name("sbc.json"), json.dumps(table, indent=1) + "\n")
+    for name, row in table.items():
+        print(f"{name}: n {row['n']}, R̂ > 1.01 in {row['rhat_above_1.01']}, divergences in "
+              f"{row['with_divergences']}, median {row['median_wall_s']:.1f} s")
+        for site, s in row["sites"].items():
+            print(f"  {site:10s} χ² p {s['chi2_p']:.3f}  mean rank {s['mean_rank_fraction']:.3f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--design", choices=("paired", "sweep"))
+    ap.add_argument("--seeds", default="0-199")
+    ap.add_argument("--warmup", type=int, default=400)
+    ap.add_argument("--samples", type=int, default=400)
+    ap.add_argument("--summary", action="store_true")
+    a = ap.parse_args()
+    if a.summary:
+        summary(parse_seeds(a.seeds))
+    elif a.design:
+        run_design(a.design, parse_seeds(a.seeds), a.warmup, a.samples)
+    else:
+        ap.error("--design or --summary expected")
+
+
+if __name__ == "__main__":
+    main()
