@@ -7,7 +7,7 @@ the exact ``log p(y_i | y_{−i}, θ)`` of the collapsed model), and with every
 recording whose Pareto k exceeds 0.7 refitted without it (``exact_loo=True``;
 ArviZ ``reloo``). Reports each model's pointwise ELPD, the Pareto k, which
 recordings were refitted and the difference with its standard error. Writes
-``benchmarks/criticality.md`` and ``criticality.json`` (``--psis-only``: the
+``benchmarks/criticality.md`` (raw rows: ``results/criticality.json``) (``--psis-only``: the
 PSIS comparison alone; ``--fast``: ``CollapsedSettings.fast()``, written to
 ``results/criticality_fast.*``).
 
@@ -87,7 +87,7 @@ def main() -> int:
             "seconds": seconds, "settings": "fast" if fast else "default",
             "recordings": list(rs.names)}
     stem = RESULTS_DIR / "criticality_fast" if fast else HERE / "criticality"
-    atomic_write(stem.with_suffix(".json"), json.dumps(rows, indent=1))
+    atomic_write(RESULTS_DIR / f"{stem.name}.json", json.dumps(rows, indent=1))  # raw rows
     md = markdown(psis, exact, rs.names, seconds, fast)
     atomic_write(stem.with_suffix(".md"), md)
     print(md)

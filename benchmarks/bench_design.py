@@ -25,7 +25,8 @@ demo set only; nothing was tuned on these seeds).
 
 Usage: ``python benchmarks/bench_design.py [--seeds 100:110] [--steps 4]
 [--strategies design,descent] [--delta-mu 0.3]``; writes
-``benchmarks/design.json`` and ``benchmarks/design.md``. ``--smoke`` runs the
+``benchmarks/design.md`` (every campaign's rows:
+``benchmarks/results/design.json``). ``--smoke`` runs the
 smallest comparison (seed 100, 2 steps, design against descent; 5 fits) and
 writes it to the temporary folder unless ``--out`` is given.
 """
@@ -41,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _common import atomic_write  # noqa: E402
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 OUT = Path(__file__).parent
 START = ((16.0, "stable"), (17.4, "stable"), (16.4, "unstable"), (17.4, "unstable"))
@@ -200,8 +201,8 @@ def main(argv=None) -> int:
                     help="the smallest comparison: seed 100, 2 steps, design against descent "
                     "(5 NUTS fits, a few minutes); written to the temporary folder unless "
                     "--out is given")
-    ap.add_argument("--out", default=None, help="output stem (.json, .md; default "
-                    "benchmarks/design)")
+    ap.add_argument("--out", default=None, help="output stem (.md and .json; default "
+                    "benchmarks/design, whose .json goes to results/)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the campaigns already in the output's .json and run only the "
                          "seeds it lacks")
@@ -225,8 +226,10 @@ def main(argv=None) -> int:
     a, b = (int(x) for x in args.seeds.split(":"))
     results = []
     stem = Path(args.out)
-    if args.resume and stem.with_suffix(".json").exists():
-        results = [r for r in json.loads(stem.with_suffix(".json").read_text())["results"]
+    # every campaign's rows: beside the table, except the committed table's (to results/)
+    raw = RESULTS_DIR / f"{stem.name}.json" if stem == OUT / "design" else stem.with_suffix(".json")
+    if args.resume and raw.exists():
+        results = [r for r in json.loads(raw.read_text())["results"]
                    if a <= r["seed"] < b]
     done = {r["seed"] for r in results}
     for seed in range(a, b):
@@ -235,7 +238,7 @@ def main(argv=None) -> int:
         results.append(campaign(seed, args.steps, strategies, args.delta_mu))
         results.sort(key=lambda r: r["seed"])
         table, md = _summary(results, args.steps)
-        atomic_write(stem.with_suffix(".json"), json.dumps(
+        atomic_write(raw, json.dumps(
             {"settings": {"start": START, "noise": NOISE, "duration_s": DURATION_S,
                           "sample_rate_hz": RATE_HZ, "steps": args.steps,
                           "nuts": "2 chains x (250 warm-up + 300 draws), max tree depth 8",

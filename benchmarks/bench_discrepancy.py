@@ -3,7 +3,7 @@
 For every effect: 4 stable + 4 unstable recordings (U = 15.75 … 17.25 m/s),
 1.5% RMS noise, sensor offsets h = 1 mm and alpha = −0.004 rad, 10 s at
 500 Hz; :func:`bayeshopf.discrepancy.analyse` is not told the effect (no
-hybrid fit). Writes ``benchmarks/discrepancy.md`` and ``discrepancy.json``.
+hybrid fit). Writes ``benchmarks/discrepancy.md`` (raw rows: ``results/discrepancy.json``).
 
     .venv/bin/python benchmarks/bench_discrepancy.py            # the table
     .venv/bin/python benchmarks/bench_discrepancy.py --smallest # + smallest detected size
@@ -200,13 +200,14 @@ def main() -> None:
               f"{r.get('median', '')} {r.get('ci90', '')} {r['time_s']:.0f}s", flush=True)
         rows.append(r)
     here = Path(__file__).parent
-    if only and (here / "discrepancy.json").is_file():  # replace those rows, keep the others
-        old = json.loads((here / "discrepancy.json").read_text())
+    raw = RESULTS_DIR / "discrepancy.json"
+    if only and raw.is_file():  # replace those rows, keep the others
+        old = json.loads(raw.read_text())
         new = {r["effect"]: r for r in rows}
         names = [r["effect"] for r in old] + [n for n in new if n not in
                                               {r["effect"] for r in old}]
         rows = [new.get(n) or next(r for r in old if r["effect"] == n) for n in names]
-    (here / "discrepancy.json").write_text(json.dumps(rows, indent=1, default=float) + "\n")
+    atomic_write(raw, json.dumps(rows, indent=1, default=float) + "\n")
     md = ["# Blind discrepancy analyses (flutter3dof)", "",
           f"Measured on {os.cpu_count()} CPU cores (shared with other jobs while it ran) with "
           "`benchmarks/bench_discrepancy.py`: 4 stable + 4 unstable recordings at U = 15.75, "

@@ -27,7 +27,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from _common import atomic_write  # noqa: E402
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 from bayeshopf.discrepancy import simulate_with_effect  # noqa: E402
 from bayeshopf.discrepancy.calibration import calibrate  # noqa: E402
@@ -117,7 +117,7 @@ def main() -> None:
     names = [a for a in sys.argv[1:] if not a.startswith("--")] or list(CASES)
     if "--table" in sys.argv:                           # rewrite the table from the JSON only
         names = []
-    path = HERE / "discrepancy_calibration.json"
+    path = RESULTS_DIR / "discrepancy_calibration.json"      # raw rows; the table is .md
     rows = {r["case"]: r for r in json.loads(path.read_text())} if path.is_file() else {}
     for name in names:
         r = one(name)

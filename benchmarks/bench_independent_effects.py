@@ -17,7 +17,7 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 
-from _common import atomic_write
+from _common import RESULTS_DIR, atomic_write
 from testbed.independent_effects import (
     EFFECTS,
     PERTURBATIONS,
@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"independent_effects: effects expected among {', '.join(MEASURE_SIZES)}; "
               f"got {', '.join(unknown)}", file=sys.stderr)
         return 2
-    path = here / "independent_effects.json"
+    path = RESULTS_DIR / "independent_effects.json"      # raw rows; the table is .md
     old = json.loads(path.read_text())["rows"] if path.exists() else []
     new = measure({n: MEASURE_SIZES[n] for n in names})
     done = {(r["effect"], r["size"]) for r in new}
