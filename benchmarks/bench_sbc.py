@@ -213,8 +213,9 @@ def summary(seeds: list[int]) -> None:
                    edgecolor="white")
             ax.set_xlim(0, BINS)
             lo, hi = stats.binom.ppf([0.005, 0.995], row["n"], 1.0 / BINS)
-            ax.axhspan(lo, hi, color="0.85", zorder=0)
-            ax.axhline(row["n"] / BINS, color="k", lw=0.8)
+            ax.axhline(row["n"] / BINS, color="k", lw=0.8, zorder=3)
+            for y in (lo, hi):
+                ax.axhline(y, color="0.2", lw=0.8, ls="--", zorder=3)
             label = {"mu0": "μ0 (Hopf)", "mu_fold": "fold", "eta": "η"}[site]
             ax.set_title(f"{name}: {label}  (χ² p = {s['chi2_p']:.2f})", fontsize=9)
             ax.set_xticks([0, BINS // 2, BINS])
@@ -222,8 +223,9 @@ def summary(seeds: list[int]) -> None:
             if r == 1:
                 ax.set_xlabel("rank of the truth among the draws")
         axes[r, 0].set_ylabel(f"simulations (of {row['n']})")
-    fig.suptitle("Simulation-based calibration: ranks of the truth (grey: 99% band of a "
-                 "uniform bin)", fontsize=10)
+    fig.suptitle("Simulation-based calibration: ranks of the truth among 99 posterior draws "
+                 "(solid: expected count; dashed: 99% range of a bin under uniform ranks)",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(ROOT / "docs" / "sbc_ranks.png", dpi=110)
     atomic_write(Path(__file__).with_name("sbc.json"), json.dumps(table, indent=1) + "\n")

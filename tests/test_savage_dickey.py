@@ -119,14 +119,9 @@ def test_two_half_normal_coefficients_against_a_double_integral():
                                                                                   abs=1e-7)
 
 
-def test_model_error_mixed_over_the_larger_models_weights():
-    # τ on a grid with a uniform prior: Z_M = mean over τ of Z_M(τ), exact per τ
-    sigmas = np.array([0.7, 1.0, 1.6, 2.5])
-    lzk = np.array([_exact_log_z([B1], sigma=s) for s in sigmas])
-    lzp = np.array([_exact_log_z([], sigma=s) for s in sigmas])
-    exact = float(special.logsumexp(lzk) - special.logsumexp(lzp))
-    # the weights as the package forms them: Laplace evidence plus the −Σ log σ normaliser
-    x = np.linspace(-0.4, 0.6, D + 1)
+def _mixed_over_sigma(sigmas, x):
+    """The term's marginal mixed over a grid of σ, weighted as the package weights τ:
+    Laplace evidence plus the −Σ log σ normaliser."""
     lz, ms, Cs = [], [], []
     for s in sigmas:
         E, G = _stacked(x, [B1], s)
@@ -135,7 +130,16 @@ def test_model_error_mixed_over_the_larger_models_weights():
         ms.append(m)
         Cs.append(C)
     w = np.exp(np.array(lz) - max(lz))
-    post = CoefficientPosterior(w / w.sum(), np.array(ms), np.array(Cs), (False,))
+    return CoefficientPosterior(w / w.sum(), np.array(ms), np.array(Cs), (False,))
+
+
+def test_model_error_mixed_over_the_larger_models_weights():
+    # τ on a grid with a uniform prior: Z_M = mean over τ of Z_M(τ), exact per τ
+    sigmas = np.array([0.7, 1.0, 1.6, 2.5])
+    lzk = np.array([_exact_log_z([B1], sigma=s) for s in sigmas])
+    lzp = np.array([_exact_log_z([], sigma=s) for s in sigmas])
+    exact = float(special.logsumexp(lzk) - special.logsumexp(lzp))
+    post = _mixed_over_sigma(sigmas, np.linspace(-0.4, 0.6, D + 1))
     assert log_bayes_factor(post) == pytest.approx(exact, abs=1e-10)
     # the weights matter: the largest σ alone is not the answer
     assert abs(lzk[-1] - lzp[-1] - exact) > 0.1
@@ -165,16 +169,7 @@ def test_the_band_of_a_half_normal_coefficient_and_of_a_pair(f):
 
 def test_the_band_mixed_over_model_error():
     sigmas = np.array([0.8, 1.3, 2.0])
-    x = np.zeros(D + 1)
-    lz, ms, Cs = [], [], []
-    for s in sigmas:
-        E, G = _stacked(x, [B1], s)
-        lz.append(laplace_evidence(E, G)[0] - N * np.log(s))
-        m, C = gaussian_marginal(E, G, x, 1)
-        ms.append(m)
-        Cs.append(C)
-    w = np.exp(np.array(lz) - max(lz))
-    post = CoefficientPosterior(w / w.sum(), np.array(ms), np.array(Cs), (False,))
+    post = _mixed_over_sigma(sigmas, np.zeros(D + 1))
     for f in (0.5, 2.0):
         exact = float(special.logsumexp([_exact_log_z([B1], f=f, sigma=s) for s in sigmas])
                       - special.logsumexp([_exact_log_z([], sigma=s) for s in sigmas]))

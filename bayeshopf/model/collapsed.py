@@ -377,6 +377,11 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
     return h
 
 
+def frequency_site(spec: CollapsedSpec):
+    """``σ_ω ~ HalfNormal(SIGMA_OMEGA_PRIOR · ω̄)``, the frequency's model error (a site)."""
+    return numpyro.sample("sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
+
+
 def error_variance(coeffs, coeffs_se, sigma, sigma_rel):
     """``se² + σ_c² + (σ_rel y)²`` per coefficient, shape of ``coeffs`` ``(n_rec, 2, 2K+1)``.
 
@@ -508,8 +513,7 @@ def collapsed_model(spec: CollapsedSpec, mu, sign, coeffs, coeffs_se, omega=None
     for c in range(2):
         numpyro.factor(f"marginal_{c}", marginals[c])
     if spec.omega_centre is not None and omega is not None:
-        sigma_omega = numpyro.sample(
-            "sigma_omega", dist.HalfNormal(SIGMA_OMEGA_PRIOR * spec.omega_centre))
+        sigma_omega = frequency_site(spec)
         numpyro.factor("marginal_omega", spec_jit(spec, frequency_marginal)(
             theta, sigma_omega, mu, sign, omega, omega_se))
 

@@ -30,8 +30,6 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
-import numpyro
-import numpyro.distributions as dist
 from numpyro import handlers
 
 from bayeshopf.errors import FitError
@@ -61,8 +59,7 @@ class PriorDraw:
 def _prior_sites(spec: cm.CollapsedSpec) -> dict:
     theta = {**cm.normal_form_sites(spec), **cm.hyper_sites(spec)}
     if spec.omega_centre is not None:
-        theta["sigma_omega"] = numpyro.sample(
-            "sigma_omega", dist.HalfNormal(fm.SIGMA_OMEGA_PRIOR * spec.omega_centre))
+        theta["sigma_omega"] = cm.frequency_site(spec)
     return theta
 
 
