@@ -283,7 +283,8 @@ class SavedHybrid:
         """
         from bayeshopf import posterior as bp
 
-        if self.spec.has_discrepancy or self.extrapolation is not None:
+        if (self.spec.has_discrepancy or self.spec.nn_training is not None
+                or self.extrapolation is not None):
             try:
                 return self.posterior.amplitude([mu], branch, predictive=predictive)[:, 0]
             except DataError:

@@ -41,6 +41,7 @@ from bayeshopf.predictive import (
     draw_indices,
     extrapolation_factor,
     frequency_draws,
+    network_draws,
     noise_sd,
     orbit_coefficients,
     rms_scale,
@@ -143,7 +144,9 @@ class HybridPosterior:
         The model orbit at μ, projected on the K harmonics the data have, plus,
         with the model discrepancy, a draw of the discrepancy there
         (:func:`discrepancy_draws`: the rig's orbit, not the normal form's
-        alone; ``nan`` where the branch does not exist in a draw); with ``control``
+        alone; ``nan`` where the branch does not exist in a draw), and at
+        infinite width the network's spread away from the recordings
+        (:func:`network_draws`); with ``control``
         ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
         that control, else the uncontrolled system's.
         """
@@ -151,9 +154,24 @@ class HybridPosterior:
         theta = {k: v[idx] for k, v in self.theta.items()}
         c = orbit_coefficients(self.spec, theta, self.run.betas[idx], mu, branch_sign(branch),
                                control=control)
+        if self.spec.nn_training is not None:
+            c = c + self._network(mu, branch, n_draws)
         if not self.spec.has_discrepancy:
             return c
         return c + self._discrepancy(mu, branch, n_draws)[0]
+
+    def _network(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
+        """:func:`network_draws` at μ for the draws of ``n_draws``, once per μ and branch."""
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        key = ("network", mu.tobytes(), branch, n_draws)
+        memo = self._discrepancy_memo
+        if key not in memo:
+            if len(memo) >= 64:
+                memo.clear()
+            idx = self._draw_indices(n_draws)
+            memo[key] = network_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
+                                      mu, branch_sign(branch), self.seed)
+        return memo[key]
 
     @cached_property
     def _discrepancy_memo(self) -> dict:

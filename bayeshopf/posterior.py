@@ -56,6 +56,7 @@ from bayeshopf.predictive import (  # noqa: F401 (re-exported: the one predictio
     draw_indices,
     extrapolation_factor,
     frequency_draws,
+    network_draws,
     noise_sd,
     orbit_coefficients,
     predictive_draws,

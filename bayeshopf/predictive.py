@@ -4,7 +4,8 @@ One path for every command: given posterior draws of the normal form and the
 hyperparameters ``θ``, the map's (and the discrepancy's latent) coefficients
 ``β`` and the frequency's ``γ``, these functions give the predicted orbits'
 harmonic coefficients at any μ (:func:`orbit_coefficients`), the model
-discrepancy there (:func:`discrepancy_draws`), the noise of a new recording
+discrepancy there (:func:`discrepancy_draws`), the infinite-width network's
+spread there (:func:`network_draws`), the noise of a new recording
 (:func:`noise_sd`), amplitudes (:func:`amplitude_of`) and frequencies
 (:func:`frequency_draws`). :class:`~bayeshopf.posterior.HybridPosterior`, saved
 fits (:mod:`bayeshopf.fit_folder`), leave-one-out (:mod:`bayeshopf.validation`) and
@@ -23,6 +24,7 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.features.harmonics import HarmonicFeatures, phase_design
 from bayeshopf.inference.cache import compiled_call
 from bayeshopf.model import collapsed as cm
+from bayeshopf.model import network_kernel as nk
 from bayeshopf.model import normal_form
 
 #: Draws used for bands (quantiles at 5%–95% are stable with 500).
@@ -228,6 +230,42 @@ def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: Harm
     rng = np.random.default_rng([seed, 3])
     eps = _common_over_mu(rng, mean.shape)
     return mean + np.sqrt(var) * eps, nugget
+
+
+def _network_program(spec: cm.CollapsedSpec):
+    """``(θ, μ, sign) ↦ ρ²τ_s² var`` of the infinite-width network's coefficients, per draw."""
+    def one(t, mu, sign):
+        var = nk.conditional_var(spec, t, mu, sign * jnp.ones_like(mu), cm.N_PHI)   # (n_mu, M)
+        return (spec.orbit_scale * t["tau_shape"]) ** 2 * var
+
+    return lambda th, mu, sign: jax.lax.map(lambda t: one(t, mu, sign), th)
+
+
+def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: int) -> np.ndarray:
+    """The infinite-width network's part of the orbits at μ beyond its conditional mean.
+
+    Per posterior draw ``θ``, the network's coefficients at μ given those at the
+    training recordings have the mean that :func:`orbit_coefficients` includes
+    (the design's network columns times ``z``) and the variance
+    :func:`~bayeshopf.model.network_kernel.conditional_var` (zero at a training
+    recording); this draws the rest, one set of standard normals per draw for
+    every μ (smooth bands, exact marginals). Zero for a network of finite width.
+
+    Returns:
+        ``(n, n_mu, 2, 2K+1)``; ``nan`` where a draw has no orbit on the branch.
+    """
+    ensure_x64()
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    n = len(next(iter(theta.values())))
+    M = 2 * spec.n_harmonics + 1
+    if spec.nn_training is None:
+        return np.zeros((n, mu.size, 2, M))
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    var = np.asarray(compiled_call("network", lambda: _network_program(spec),
+                                   (th, jnp.asarray(mu), np.float64(sign)),
+                                   key=_spec_key(spec)))                       # (n, n_mu, M)
+    eps = _common_over_mu(np.random.default_rng([seed, 4]), (n, mu.size, 2, M))
+    return np.sqrt(var)[:, :, None, :] * eps
 
 
 def scale_orbits(coeffs, factor) -> np.ndarray:

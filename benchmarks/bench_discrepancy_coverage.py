@@ -1,14 +1,17 @@
 """Coverage and interval score of μ0 and the fold on simulated rigs with structural error.
 
 Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs paired,short,sweep]
-[--models discrepancy,plain]``; ``--summary`` prints the table of what finished.
+[--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for chosen seeds); ``--summary
+[FIRST LAST] [--seeds …]`` prints the table of what finished.
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
 the detection code (``bench_loo_reference_class.draw_system(seed, effects=True)``;
 the truth is that system's own continuation). It is recorded in three designs,
-then fitted by each model (``discrepancy``: the default model; ``plain``:
-``CollapsedSettings(discrepancy=False)``):
+then fitted by each model of :data:`MODELS` (``plain``: without the model
+discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
+``kernel_plain``: the same two with the map's network at infinite width,
+``nn_width=None``; every other setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -42,6 +45,11 @@ DESIGNS = {
     "sweep": dict(stable=(0.15, 0.4, 0.65, 0.9, 1.15), unstable=(0.2, 0.45),
                   duration_s=20.0, rate_hz=500.0),
 }
+#: The settings each model changes from the defaults.
+MODELS = {"plain": dict(discrepancy=False, nn_width=16),
+          "discrepancy": dict(discrepancy=True, nn_width=16),
+          "kernel": dict(discrepancy=True, nn_width=None),
+          "kernel_plain": dict(discrepancy=False, nn_width=None)}
 NOISE = 0.015
 ALPHA = 0.1
 
@@ -69,7 +77,7 @@ def fit_one(rs, model: str) -> dict:
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
 
-    settings = replace(CollapsedSettings(), discrepancy=(model == "discrepancy"))
+    settings = replace(CollapsedSettings(), **MODELS[model])
     t0 = time.perf_counter()
     post = fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
     out = {"wall_s": time.perf_counter() - t0, "warnings": post.diagnostics["warnings"]}
@@ -80,7 +88,7 @@ def fit_one(rs, model: str) -> dict:
     return out
 
 
-def run(first: int, last: int, designs, models) -> None:
+def run(seeds, designs, models) -> None:
     from bench_loo_reference_class import draw_system
 
     OUT.parent.mkdir(parents=True, exist_ok=True)
@@ -89,7 +97,7 @@ def run(first: int, last: int, designs, models) -> None:
         for line in OUT.read_text().splitlines():
             r = json.loads(line)
             done.add((r["seed"], r["design"], r["model"]))
-    for seed in range(first, last + 1):
+    for seed in seeds:
         todo = [(d, m) for d in designs for m in models if (seed, d, m) not in done]
         if not todo:
             continue
@@ -125,14 +133,14 @@ def run(first: int, last: int, designs, models) -> None:
                                         if k in row}, f"{res.get('wall_s', 0):.0f} s", flush=True)
 
 
-def summary(first=None, last=None) -> None:
+def summary(seeds=None) -> None:
     rows = [json.loads(x) for x in OUT.read_text().splitlines()] if OUT.exists() else []
-    rows = [r for r in rows if "mu0" in r and (first is None or first <= r["seed"] <= last)]
+    rows = [r for r in rows if "mu0" in r and (seeds is None or r["seed"] in seeds)]
     print("| design | model | sets | μ0 inside | μ0 width | μ0 score | fold inside | "
           "fold width | fold score |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for design in DESIGNS:
-        for model in ("plain", "discrepancy"):
+        for model in MODELS:
             sub = [r for r in rows if r["design"] == design and r["model"] == model]
             if not sub:
                 continue
@@ -149,15 +157,25 @@ def main(argv):
     from bayeshopf.inference.cache import configure_xla_cpu
 
     configure_xla_cpu()
+    seeds = None
+    if "--seeds" in argv:
+        i = argv.index("--seeds")
+        seeds = [int(a) for a in argv[i + 1].split(",")]
+        argv = argv[:i] + argv[i + 2:]
+    bounds = [int(a) for a in argv[:2] if a.isdigit()]
+    if seeds is None and len(bounds) == 2:
+        seeds = list(range(bounds[0], bounds[1] + 1))
     if "--summary" in argv:
-        rest = [a for a in argv if a != "--summary"]
-        summary(*(int(a) for a in rest[:2])) if len(rest) >= 2 else summary()
+        summary(None if seeds is None else set(seeds))
         return
     designs = (argv[argv.index("--designs") + 1].split(",") if "--designs" in argv
                else list(DESIGNS))
     models = (argv[argv.index("--models") + 1].split(",") if "--models" in argv
               else ["plain", "discrepancy"])
-    run(int(argv[0]), int(argv[1]), designs, models)
+    unknown = [m for m in models if m not in MODELS]
+    if unknown:
+        sys.exit(f"--models: expected some of {', '.join(MODELS)}; got {', '.join(unknown)}")
+    run(seeds, designs, models)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """What the map's fixed hidden layer decides: the demo refitted with other draws and widths.
 
-Run: ``python benchmarks/bench_hidden_layer.py BLOCK [--widths 16,64] [--discrepancy]``
+Run: ``python benchmarks/bench_hidden_layer.py BLOCK [--widths 16,64,inf] [--discrepancy]``
 (``--table``: print the stored rows' tables without fitting).
 
 The map's network has a hidden layer ``(W_1, b_1) ~ N(0, 1)`` drawn once
@@ -11,6 +11,10 @@ expectation over the hidden prior (Neal 1996, *Bayesian Learning for Neural
 Networks*, ch. 2; Williams 1998, *Computing with infinite networks*), so the
 draw ``s`` should matter less, at the cost of ``H`` columns in the collapsed
 marginal.
+
+Width ``inf`` is that limit itself (``Settings(nn_width=None)``,
+:mod:`bayeshopf.model.network_kernel`): it has no draw, so it is fitted once
+per block (at the block's first ``nn_seed``, which it does not read).
 
 Each row (but the ``rig`` block's) is one fit of the demo's recordings
 (``flutter_experiment(seed=0)``, what ``bayeshopf demo`` fits) with
@@ -82,7 +86,8 @@ def fit_row(rs, truth: dict, block: str, width: int, seed: int, discrepancy: boo
     """One fit and its record."""
     import bayeshopf as bh
 
-    settings = bh.Settings(nn_width=width, nn_seed=seed, discrepancy=discrepancy)
+    settings = bh.Settings(nn_width=None if width == "inf" else width, nn_seed=seed,
+                           discrepancy=discrepancy)
     t0 = time.perf_counter()
     fit = bh.fit(rs, settings=settings, seed=fit_seed, progress=False)
     wall = time.perf_counter() - t0
@@ -115,10 +120,16 @@ def _key(r: dict) -> tuple:
     return r["block"], r["model"], r["width"], r["seed"], r.get("fit_seed", 0)
 
 
+def _width_order(h) -> tuple:
+    """Finite widths in order, then ``"inf"`` (the network's limit)."""
+    return (h == "inf", 0 if h == "inf" else h)
+
+
 def ratios(rows: list, block: str, model: str) -> dict:
     """Per H: max/min over the seeds of each quantity's interval width, and the mean wall time."""
     out = {}
-    for h in sorted({r["width"] for r in rows if r["block"] == block and r["model"] == model}):
+    for h in sorted({r["width"] for r in rows if r["block"] == block and r["model"] == model},
+                    key=_width_order):
         sel = [r for r in rows if r["block"] == block and r["model"] == model
                and r["width"] == h]
         out[h] = {"seeds": sorted(r["seed"] if block != "nuts" else r["fit_seed"] for r in sel),
@@ -140,7 +151,8 @@ def table(rows: list) -> str:
             lines += [f"### block {block}, model {model}", "",
                       "| H | nn_seed | fit seed | μ0 median [90%] | width | fold median [90%] "
                       "| width | wall s | draws/chain | leapfrog | NUTS |", "|" + "---|" * 11]
-            for r in sorted(sel, key=_key):
+            for r in sorted(sel, key=lambda r: (_width_order(r["width"]), r["seed"],
+                                                r.get("fit_seed", 0))):
                 cells = [str(r["width"]), str(r["seed"]), str(r.get("fit_seed", 0))]
                 for k in QUANTITIES:
                     m, lo, hi = r[k]
@@ -172,7 +184,8 @@ def main(argv: list[str]) -> None:
     block = argv[0]
     seeds, widths = BLOCKS[block]
     if "--widths" in argv:
-        widths = tuple(int(v) for v in argv[argv.index("--widths") + 1].split(","))
+        widths = tuple(v if v == "inf" else int(v)
+                       for v in argv[argv.index("--widths") + 1].split(","))
     if widths is None:
         raise SystemExit(f"bench_hidden_layer: --widths expected for the {block} block "
                          "(H chosen on the select block); got none")
@@ -192,7 +205,7 @@ def main(argv: list[str]) -> None:
         truth = truth.values()
         print(f"truth: {truth}", flush=True)
     for h in widths:
-        for s in seeds:
+        for s in (seeds[:1] if h == "inf" else seeds):      # the limit has no draw
             for f in fit_seeds:
                 if any(_key(r) == (block, model, h, s, f) for r in _read()):
                     continue

@@ -1,7 +1,7 @@
 """Leave-one-out on the wind-tunnel rig: coverage, width and log predictive density.
 
 Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--discrepancy]
-[--floor K]``.
+[--floor K] [--nn-width H|inf]``.
 Each of the rig's 7 recordings is held out in turn, the model refitted on the
 others (seed 0) and the held-out amplitude predicted with its 90% band
 (``bayeshopf.validation.leave_one_out``, the refits kept). The log predictive
@@ -41,6 +41,9 @@ def main(argv):
                            extrapolation_scale=float(argv[argv.index("--extrapolation-scale") + 1]))
     if "--discrepancy" in argv:
         settings = replace(settings, discrepancy=True)
+    if "--nn-width" in argv:
+        w = argv[argv.index("--nn-width") + 1]
+        settings = replace(settings, nn_width=None if w == "inf" else int(w))
     if "--floor" in argv:
         settings = replace(settings, discrepancy_floor=float(argv[argv.index("--floor") + 1]))
     rs = load_recordings(RIG)

@@ -560,3 +560,31 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "--extrapolation-scale" in err, err
         assert "a positive number expected" in err and not seen
+
+
+def test_nn_width_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
+    """``--nn-width inf`` fits the network at infinite width, a number its hidden units;
+    anything else is a one-line error before any fit."""
+    import bayeshopf.posterior
+    from bayeshopf.errors import FitError
+
+    seen = {}
+
+    def stop(rs, criticality, **kw):   # the fit itself is tested elsewhere
+        seen.update(kw)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
+    for value, want in (("inf", None), ("64", 64)):
+        seen.clear()
+        assert main(["demo", "--fast", "--out", str(tmp_path / value), "--no-figures",
+                     "--nn-width", value]) == 2
+        assert "stopped by the test" in capsys.readouterr().err
+        assert seen["settings"].nn_width == want
+    for bad in ("0", "-4", "wide", "2.5"):
+        seen.clear()
+        assert main(["demo", "--fast", "--out", str(tmp_path / "c"), "--no-figures",
+                     "--nn-width", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and f"--nn-width {bad}" in err, err
+        assert not seen

@@ -389,3 +389,37 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
     bad = replace(post, run=replace(post.run, chains=chains))
     (w,) = [w for w in diagnose(bad)["warnings"] if "relative model error" in w]
     assert "model discrepancy carries it" in w and "by leave-one-out" in w
+
+@pytest.fixture(scope="module")
+def planted_infinite_width():
+    """The planted recordings fitted with the map's network at infinite width."""
+    rs, truth = demo_system(seed=11, fast=True)
+    return (fit_hybrid(rs, "subcritical", seed=0, settings=replace(SETTINGS, nn_width=None),
+                       progress=False), truth)
+
+
+def test_the_network_at_infinite_width_fits_predicts_and_saves(planted_infinite_width, tmp_path):
+    """No hidden layer drawn: the planted μ0 and fold inside their intervals; the network's
+    spread is known at a training orbit and grows beyond the recordings; a saved fit
+    predicts a new measurement there as the fit does."""
+    from bayeshopf import fit_folder
+    from bayeshopf.posterior import network_draws
+
+    post, truth = planted_infinite_width
+    assert post.spec.nn_training is not None and post.spec.nn_hidden[0].shape == (3, 0)
+    assert post.interval("mu0").contains(truth.mu0)
+    assert post.interval("mu_fold").contains(truth.mu_fold)
+    f = post.features
+    i = int(np.argmax(np.where(f.unstable, -np.inf, f.mu)))   # the stable recording of largest μ
+    idx = post._draw_indices(200)
+    theta = {k: v[idx] for k, v in post.theta.items()}
+    beyond = f.mu[i] + 0.5 * post.spec.mu_span
+    spread = network_draws(post.spec, theta, [f.mu[i], beyond], 1.0, seed=0)[..., 1]  # a1
+    size = np.median(np.abs(post.orbit_coefficients([f.mu[i]], "stable")[:, 0, :, 1]))
+    assert np.std(spread[:, 0]) < 1e-3 * size
+    assert np.std(spread[:, 1]) > 10 * np.std(spread[:, 0])
+    q = [0.05, 0.5, 0.95]
+    b = np.quantile(post.amplitude([beyond], "stable", predictive=True)[:, 0], q)
+    fit_folder.save_hybrid(post, tmp_path / "fit")
+    p = fit_folder.load_fit(tmp_path / "fit").predict(beyond, "stable", predictive=True)
+    np.testing.assert_allclose([p.lo, p.median, p.hi], b, rtol=1e-9)

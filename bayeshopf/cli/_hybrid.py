@@ -47,6 +47,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="fit with the model discrepancy, a Gaussian process over the diagram "
                    "on the orbits' fundamental whose scale is sampled with the Hopf point and "
                    "the fold (docs/model_discrepancy.md; not yet the default)")
+    p.add_argument("--nn-width", default=None, metavar="H",
+                   help="hidden units of the map's network (default 16), or 'inf' for its "
+                   "limit of infinite width, a Gaussian process with the network's kernel "
+                   "that has no hidden layer to draw (docs/model.md)")
     p.add_argument("--json", action="store_true",
                    help="print the results as JSON (schema of bayeshopf.cli._schema) instead "
                    "of the table")
@@ -71,6 +75,8 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
         raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
                        "default per draw 0.1, or 0.7 where the relative model error is above "
                        "2%)")
+    if getattr(args, "nn_width", None) is not None:
+        _nn_width(args.nn_width)
     check_out(out, args.force)
     worker = None
     if not args.no_figures:   # imports beside NUTS, and a figure process
@@ -92,7 +98,20 @@ def _settings(args) -> inference.CollapsedSettings:
                        discrepancy=bool(getattr(args, "discrepancy", False)))
     if getattr(args, "extrapolation_scale", None) is not None:
         settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
+    width = getattr(args, "nn_width", None)
+    if width is not None:
+        settings = replace(settings, nn_width=_nn_width(width))
     return settings
+
+
+def _nn_width(text: str) -> int | None:
+    """``--nn-width``: a positive whole number, or ``inf`` (``None``: infinite width)."""
+    if text.strip().lower() in ("inf", "infinite", "∞"):
+        return None
+    if not text.strip().isdigit() or int(text) < 1:
+        raise FitError(f"--nn-width {text}: a positive whole number of hidden units, or 'inf', "
+                       "expected")
+    return int(text)
 
 
 def _fit_and_save(rs, criticality, args, out, truth, extra, worker) -> dict:

@@ -15,6 +15,7 @@ from bayeshopf import fit_folder
 from bayeshopf._format import format_interval, format_number
 from bayeshopf.cli import _schema
 from bayeshopf.cli._checks import check_ci, check_share
+from bayeshopf.cli._options import add_ci, add_fit_dir
 from bayeshopf.design import Candidate, DesignResult, next_measurements, parse_candidates
 from bayeshopf.errors import DataError, FitError
 
@@ -27,7 +28,7 @@ DESCRIPTION = ("From a folder written by 'bayeshopf fit' (no refit), rank candid
 
 def add_arguments(s: argparse.ArgumentParser) -> None:
     """The options of ``next``."""
-    s.add_argument("fit_dir", help="folder written by 'bayeshopf fit' or 'bayeshopf demo'")
+    add_fit_dir(s)
     s.add_argument("--target", choices=("fold", "hopf", "diagram"), default="fold",
                    help="what to learn: the fold (default), the Hopf point, or the diagram")
     s.add_argument("--candidates", default=None, metavar="MU_MIN:MU_MAX:STEP",
@@ -35,7 +36,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
                    "the data)")
     s.add_argument("--branch", choices=("stable", "unstable", "both"), default="both")
     s.add_argument("--n", type=int, default=3, help="how many to recommend (default 3)")
-    s.add_argument("--ci", type=float, default=0.9, help="interval mass (default 0.9)")
+    add_ci(s, "the intervals")
     s.add_argument("--seed", type=int, default=0, help="seed of the simulated measurements")
     s.add_argument("--min-p-exists", type=float, default=0.9, metavar="P",
                    help="never recommend where the branch exists in fewer than this share of "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from bayeshopf import fit_folder, hybrid
 from bayeshopf.cli._checks import check_ci
+from bayeshopf.cli._options import add_ci, add_fit_dir, add_recordings
 from bayeshopf.lab_report import write_lab_report
 
 DESCRIPTION = ("Write one self-contained HTML page of a folder written by 'bayeshopf fit' or "
@@ -18,14 +19,11 @@ DESCRIPTION = ("Write one self-contained HTML page of a folder written by 'bayes
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``report``."""
-    p.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
+    add_fit_dir(p)
     p.add_argument("--out", default=None,
                    help="the HTML file to write (default FIT_DIR/report.html; replaced whole)")
-    p.add_argument("--recordings", metavar="DATA", default=None,
-                   help="the recordings the fit was made from (folder, as for 'fit'), for the "
-                   "time-series figure")
-    p.add_argument("--ci", type=float, default=0.9,
-                   help="probability mass of the bands and intervals (default 0.9)")
+    add_recordings(p, "the time-series figure")
+    add_ci(p)
 
 
 def run(args) -> int:

@@ -6,6 +6,7 @@ import argparse
 
 from bayeshopf import fit_folder
 from bayeshopf.cli._checks import check_ci
+from bayeshopf.cli._options import add_ci, add_fit_dir, add_recordings
 from bayeshopf.errors import DataError
 from bayeshopf.plotting._units import LENGTHS
 
@@ -17,14 +18,11 @@ DESCRIPTION = ("Draw the figures of a folder written by 'bayeshopf fit' or 'baye
 
 def add_arguments(pl: argparse.ArgumentParser) -> None:
     """The options of ``plot``."""
-    pl.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
+    add_fit_dir(pl)
     pl.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
                     help="file format (default png; pdf and svg are vector)")
-    pl.add_argument("--recordings", metavar="DATA", default=None,
-                    help="the recordings the fit was made from (folder, as for 'fit'), for "
-                    "the phase portraits and time series")
-    pl.add_argument("--ci", type=float, default=0.9,
-                    help="probability mass of the bands and intervals (default 0.9)")
+    add_recordings(pl, "the phase portraits and time series")
+    add_ci(pl)
     pl.add_argument("--length-unit", default="auto",
                     help="unit of lengths: m, cm, mm, µm, or auto (default: the one in which "
                     "the largest amplitude reads 1-1000)")

@@ -21,6 +21,7 @@ from bayeshopf import fit_folder
 from bayeshopf._format import NO_VALUE, format_interval, format_number
 from bayeshopf.cli import _schema
 from bayeshopf.cli._checks import check_ci, check_share
+from bayeshopf.cli._options import add_ci, add_fit_dir
 from bayeshopf.diagnostics.summaries import Interval
 from bayeshopf.errors import DataError
 
@@ -35,13 +36,12 @@ MIN_P_EXISTS = 0.5
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``predict``."""
-    p.add_argument("fit_dir", help="folder written by 'bayeshopf fit'")
+    add_fit_dir(p)
     p.add_argument("--mu", nargs="+", action="extend", required=True, metavar="MU",
                    help="values of the bifurcation parameter, or START:STOP:STEP "
                    "(STOP included), e.g. --mu 15 15.5 16 or --mu 14:17:0.5; repeated "
                    "--mu add values")
-    p.add_argument("--ci", type=float, default=0.9,
-                   help="probability mass of the intervals (default 0.9)")
+    add_ci(p, "the intervals")
     p.add_argument("--branch", choices=("stable", "unstable"), default="stable")
     p.add_argument("--min-p-exists", type=float, default=MIN_P_EXISTS, metavar="P",
                    help="share of posterior draws in which the branch must exist at μ for a "

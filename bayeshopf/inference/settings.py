@@ -29,10 +29,13 @@ class CollapsedSettings:
     Attributes:
         n_harmonics: Harmonics per channel of the features.
         segment_periods: Segment length in periods.
-        nn_width: Hidden units of the map's network.
+        nn_width: Hidden units of the map's network; ``None``: its limit of
+            infinite width, a Gaussian process with the network's kernel
+            (:mod:`bayeshopf.model.network_kernel`), which has no hidden layer
+            to draw.
         nn_seed: Seed of the network's fixed hidden layer (a draw from its
             prior, :func:`~bayeshopf.model.collapsed.hidden_layer`; refit with
-            others to see what the draw decides).
+            others to see what the draw decides); unused at infinite width.
         unfolding: ``"curved"`` (default) or ``"linear"`` (the paper's ``μ − μ0``).
         inference: ``"nuts"`` (default) or ``"svi"``.
         num_chains: NUTS chains.
@@ -81,7 +84,7 @@ class CollapsedSettings:
 
     n_harmonics: int = 4
     segment_periods: float = 5.0
-    nn_width: int = 16
+    nn_width: int | None = 16
     nn_seed: int = 0
     unfolding: str = "curved"
     inference: str = "nuts"
@@ -104,6 +107,10 @@ class CollapsedSettings:
     discrepancy_floor: float = dm.FLOOR
 
     def __post_init__(self):
+        w = self.nn_width
+        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
+            raise FitError("nn_width: a positive whole number of hidden units, or None for the "
+                           f"network's limit of infinite width, expected; got {w!r}")
         s = self.extrapolation_scale
         if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
                               or not math.isfinite(s) or s <= 0):
@@ -120,7 +127,7 @@ class CollapsedSettings:
                    svi_steps=1000, n_svi_draws=400)
 
 
-def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 16,
+def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | None = 16,
                unfolding: str = "curved", mu_label: str = "mu",
                mu_units: str = "", frequency: bool = True,
                control: bool = True, discrepancy: bool = False,
@@ -132,6 +139,8 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
     ``CONTROL_SCALE · ρ / ū`` (``ū`` the RMS of ``|U_i|``). With ``discrepancy``
     the model includes the discrepancy Gaussian process, its coefficient
     scales ``q`` read off the features (:mod:`bayeshopf.model.discrepancy`).
+    ``nn_width=None`` gives the network at infinite width, over the features'
+    recordings (:mod:`bayeshopf.model.network_kernel`).
 
     Raises:
         FitError: For fewer than two distinct μ, an unknown criticality or
@@ -162,7 +171,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         mu_centre=float(0.5 * (mu.max() + mu.min())), mu_span=float(mu.max() - mu.min()),
         mu_min=float(mu.min()),
         mu_unstable_max=float(unstable_mu.max()) if unstable_mu.size else None,
-        orbit_scale=scale, nn_hidden=cm.hidden_layer(nn_width, nn_seed),
+        orbit_scale=scale, nn_hidden=cm.hidden_layer(nn_width or 0, nn_seed),
         mu_label=mu_label, mu_units=mu_units,
         unfolding=unfolding if criticality == "subcritical" else "linear",
         omega_centre=float(np.mean(features.omega)) if frequency else None,
@@ -170,6 +179,9 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int = 
         discrepancy_scale=(tuple(map(tuple, dm.coefficient_scale(features.coeffs).tolist()))
                            if discrepancy else None),
         discrepancy_floor=float(discrepancy_floor),
+        nn_training=None if nn_width is not None else (
+            tuple(float(m) for m in mu),
+            tuple(-1.0 if u else 1.0 for u in features.unstable)),
     )
 
 

@@ -5,6 +5,9 @@
 :mod:`~bayeshopf.model.marginal` (the collapsed Gaussian),
 :mod:`~bayeshopf.model.frequency` (the phase speed),
 :mod:`~bayeshopf.model.discrepancy` (the model discrepancy),
+:mod:`~bayeshopf.model.network_kernel` (the map's network at infinite width),
+:mod:`~bayeshopf.model.extrapolation` (the extra model error away from the recordings of
+the model without the discrepancy),
 :mod:`~bayeshopf.model.collapsed` (the NumPyro model, which re-exports the others' names) and
 :mod:`~bayeshopf.model.prior_predictive` (data sets drawn from its prior).
 """

@@ -34,7 +34,11 @@ log-normal priors, integrated over with the rest: how much the map may change
 with μ trades against μ0, and the
 posterior must carry that. The hidden layer ``(W_1, b_1)`` is a fixed draw from
 its unit-normal prior (random features), so the network's prior is kept and its
-output layer integrated exactly.
+output layer integrated exactly; or (``spec.nn_training`` set) the network is its
+limit of infinite width, a Gaussian process with the network's kernel whose
+coefficients at the training orbits are latent linear columns
+(:mod:`bayeshopf.model.network_kernel`), so no draw of a hidden layer decides
+anything.
 
 **Likelihood.** ``y_{i,c} ~ N(Φ_i β_c, diag(se_{i,c}^2 + σ_c^2 + σ_rel^2 y_{i,c}^2))``,
 with ``se`` the measured standard errors, ``σ_c ~ HalfNormal(0.02 ρ)`` one
@@ -87,21 +91,9 @@ take the discrepancy's conditional there (``posterior.discrepancy_draws``).
 With ``spec.discrepancy_scale = None`` the model is the one without it
 (``D = diag(se² + σ_c² + (σ_rel y)²)``).
 
-**Extra model error away from the recordings** (predictions only, a user's
-override). A new recording at μ on branch ``b`` may have its orbit about its
-centre scaled by ``e^{δ_b(μ)}``, with ``δ_b`` a squared-exponential Gaussian
-process in μ conditioned on ``δ_b = 0`` at that branch's training recordings,
-
-.. math::  δ_b(μ) \sim N\big(0, s_e^2\,c_b(μ)^2\big),\quad
-           c_b(μ)^2 = 1 - k_*^T K^{-1} k_*,\quad
-           k(μ, μ') = e^{-(μ-μ')^2 / 2ℓ^2},
-
-``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``, with ``S``
-the setting ``extrapolation_scale``; unset, a fit with the discrepancy takes
-none, and a fit without it takes :data:`EXTRAPOLATION_SCALE` in a posterior draw
-whose σ_rel is within :data:`SIGMA_REL_LIMIT` and :data:`EXTRAPOLATION_SCALE_MISFIT`
-in one above it (``posterior.default_extrapolation_scale``, the rule of the model
-without the discrepancy, kept while the discrepancy is not the default).
+**Extra model error away from the recordings** (predictions only): the rule of
+the model without the discrepancy and a user's override,
+:mod:`bayeshopf.model.extrapolation` (its constants re-exported here).
 """
 
 from __future__ import annotations
@@ -113,6 +105,14 @@ import numpyro
 import numpyro.distributions as dist
 
 from bayeshopf.model import discrepancy as dm
+from bayeshopf.model import network_kernel as nk
+from bayeshopf.model.extrapolation import (  # noqa: F401 (re-exported)
+    EXTRAPOLATION_LENGTH,
+    EXTRAPOLATION_SCALE,
+    EXTRAPOLATION_SCALE_MISFIT,
+    SIGMA_REL_LIMIT,
+    extrapolation_sd,
+)
 from bayeshopf.model.frequency import (  # noqa: F401 (re-exported)
     FREQUENCY_SCALE,
     FREQUENCY_TERMS,
@@ -155,18 +155,6 @@ TAU_SHAPE_PRIOR = (0.1, 1.0)
 SIGMA_PRIOR = 0.02
 #: Half-normal scale of the relative model error σ_rel (a fraction of each coefficient).
 SIGMA_REL_PRIOR = 0.02
-#: Half-normal scale of the extra model error away from the recordings, ``s_e`` (log
-#: orbit size), of a fit without the model discrepancy whose relative model error σ_rel
-#: passes its check (:data:`SIGMA_REL_LIMIT`; module docstring).
-EXTRAPOLATION_SCALE = 0.1
-#: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
-#: (``posterior.default_extrapolation_scale``), for a fit without the discrepancy.
-EXTRAPOLATION_SCALE_MISFIT = 0.7
-#: Relative model error σ_rel above which a fit without the discrepancy misses the
-#: orbits' sizes (its prior scale, 2% of each coefficient).
-SIGMA_REL_LIMIT = 0.02
-#: Its correlation length as a fraction of the recordings' μ span Δμ.
-EXTRAPOLATION_LENGTH = 1.0 / 3.0
 #: Prior sd of the control's complex gain ``H`` in units of ``ρ / ū`` (module docstring).
 CONTROL_SCALE = 1.0
 #: Prior sd of the unfolding's curvature ``w`` (:func:`unfolding`; 0 is the paper's line).
@@ -189,7 +177,12 @@ def basis_names(spec: CollapsedSpec) -> list[str]:
             term = " ".join(t for t in (f"u1^{i}" if i else "", f"u2^{j}" if j else "",
                                        f"m^{p}" if p else "") if t)
             names.append(term or "1")
-    names += [f"nn{h}" for h in range(spec.nn_hidden[0].shape[1])]
+    if spec.nn_training is None:
+        names += [f"nn{h}" for h in range(spec.n_network)]
+    else:
+        coef = ["a0"] + [f"a{k}" for k in range(1, spec.n_harmonics + 1)] + \
+            [f"b{k}" for k in range(1, spec.n_harmonics + 1)]
+        names += [f"nn_{c}_rec{i}" for c in coef for i in range(len(spec.nn_training[0]))]
     return names + (list(CONTROL_TERMS) if spec.control_scale is not None else [])
 
 
@@ -218,8 +211,9 @@ def prior_sd(spec: CollapsedSpec, tau_mu, tau_shape):
             deg = i + j
             s = rho * DEGREE_SCALE[deg] * tau_mu**p * (tau_shape if deg >= 2 else 1.0)
             sds.append(jnp.broadcast_to(s, jnp.shape(tau_mu)))
-    H = spec.nn_hidden[0].shape[1]
-    nn = jnp.broadcast_to(rho * tau_shape / jnp.sqrt(H), jnp.shape(tau_mu) + (H,))
+    H = spec.n_network          # hidden units, or the infinite-width network's latents
+    unit = 1.0 if spec.nn_training is not None else 1.0 / np.sqrt(max(H, 1))
+    nn = jnp.broadcast_to(rho * tau_shape * unit, jnp.shape(tau_mu) + (H,))
     parts = [jnp.stack(sds, axis=-1), nn]
     if spec.control_scale is not None:
         n = len(CONTROL_TERMS)
@@ -260,7 +254,8 @@ def control_columns(spec: CollapsedSpec, control):
     return jnp.stack([h_r, h_i], axis=-1)
 
 
-def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, control=None):
+def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, control=None,
+           training: bool = False):
     r"""``Φ_i = P Ψ_i`` for every recording, shape ``(n_rec, 2K+1, J)``.
 
     On the circle ``ũ = s_i (\cos φ, \sin φ)`` (``s_i = r_i / r_ref``) a
@@ -268,10 +263,15 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, contr
     is ``s_i^{i+j} μ̃_i^p`` times a constant (:func:`_monomial_harmonics`); only
     the network's columns are evaluated at the ``n_phi`` phases. Equal to
     ``P · basis(ũ(φ_n), μ̃_i)`` (``tests/test_collapsed.py``), with a quarter of
-    the work. With the control term (``spec.control_scale``) the last two
-    columns are :func:`control_columns` of ``control`` ``(n_rec, 2)``, those of
-    ``w2`` (:func:`channel_designs` gives ``w1`` zeros there); ``None`` means
-    no control (the uncontrolled system: a new μ, the diagram).
+    the work. At infinite width (``spec.nn_training``) the network's columns are
+    :func:`~bayeshopf.model.network_kernel.columns`: at the training
+    recordings the factor of its prior covariance, elsewhere the conditional
+    mean given the training ones (``training``: ``mu`` and ``sign`` are those
+    recordings, whose columns are then the factor itself). With the control
+    term (``spec.control_scale``) the last two columns are
+    :func:`control_columns` of ``control`` ``(n_rec, 2)``, those of ``w2``
+    (:func:`channel_designs` gives ``w1`` zeros there); ``None`` means no
+    control (the uncontrolled system: a new μ, the diagram).
     """
     phi = 2 * np.pi * np.arange(n_phi) / n_phi
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
@@ -281,10 +281,13 @@ def design(spec: CollapsedSpec, mu, sign, theta: dict, n_phi: int = N_PHI, contr
     m_pow = jnp.stack([m**p for p in MU_POWERS], axis=-1)                         # (n, n_pow)
     scale = (m_pow[:, :, None] * s_pow[:, None, :]).reshape(s.shape[0], -1)      # (n, J_mono)
     C = np.tile(_monomial_harmonics(spec.n_harmonics, n_phi), (1, len(MU_POWERS)))
-    W, b = (np.asarray(a) for a in spec.nn_hidden)
-    pre = (s[:, None, None] * (np.cos(phi)[:, None] * W[0] + np.sin(phi)[:, None] * W[1])
-           + m[:, None, None] * W[2] + b)                                          # (n, N, H)
-    nn = jnp.einsum("kn,inh->ikh", projection(spec.n_harmonics, n_phi), jnp.tanh(pre))
+    if spec.nn_training is None:
+        W, b = (np.asarray(a) for a in spec.nn_hidden)
+        pre = (s[:, None, None] * (np.cos(phi)[:, None] * W[0] + np.sin(phi)[:, None] * W[1])
+               + m[:, None, None] * W[2] + b)                                      # (n, N, H)
+        nn = jnp.einsum("kn,inh->ikh", projection(spec.n_harmonics, n_phi), jnp.tanh(pre))
+    else:
+        nn = nk.columns(spec, theta, mu, sign, n_phi, training=training)
     cols = [scale[:, None, :] * C, nn]
     if spec.control_scale is not None:
         cols.append(control_columns(spec, jnp.zeros((s.shape[0], 2)) if control is None
@@ -440,13 +443,16 @@ def linear_system(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se,
     return Phis, sd, ds
 
 
-def channel_designs(spec: CollapsedSpec, mu, sign, theta: dict, control=None) -> list:
+def channel_designs(spec: CollapsedSpec, mu, sign, theta: dict, control=None,
+                    training: bool = True) -> list:
     """``Φ`` of each frame axis, flattened to ``(n_rec (2K+1), J)``.
 
     The same for both axes, except that with the control term ``w1``'s control
     columns are zero (the response is ``w2``'s; module docstring, "Control").
+    ``training``: ``mu`` and ``sign`` are the recordings the model was built on
+    (what the likelihood sees; see :func:`design`).
     """
-    Phi = design(spec, mu, sign, theta, control=control)
+    Phi = design(spec, mu, sign, theta, control=control, training=training)
     flat = Phi.reshape(-1, spec.n_basis)
     if spec.control_scale is None:
         return [flat, flat]
@@ -553,6 +559,9 @@ def map_mean(spec: CollapsedSpec, theta: dict, mu, sign, coeffs, coeffs_se, cont
 def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi, control=None):
     """Predicted orbit ``w(φ)`` in the frame at one μ, shape ``phi.shape + (2,)``.
 
+    At infinite width the network's part is its conditional mean's ``K``
+    harmonics (:mod:`bayeshopf.model.network_kernel`).
+
     With the control term, ``control`` ``(u_a, u_b)`` adds the response
     ``h_r (u_a cos φ + u_b sin φ) + h_i (u_b cos φ − u_a sin φ)`` of each axis
     (``β``'s last two rows, zero for ``w1``); ``None`` is the uncontrolled orbit.
@@ -560,33 +569,21 @@ def orbit(spec: CollapsedSpec, theta: dict, beta, mu, sign, phi, control=None):
     r = radius(spec, mu, sign, theta)
     scale = r / reference_radius(spec, theta.get("a2", -1.0))
     u = scale * jnp.stack([jnp.cos(phi), jnp.sin(phi)], axis=-1)
-    w = basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta[: spec.n_map]
+    n_mono = len(MONOMIALS) * len(MU_POWERS)
+    if spec.nn_training is None:
+        w = basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta[: spec.n_map]
+    else:       # the network's conditional mean at this orbit, as its Fourier series
+        w = basis(u, spec.mu_tilde(mu), spec.nn_hidden) @ beta[:n_mono]
+        cols = nk.columns(spec, theta, jnp.reshape(mu, (1,)), jnp.reshape(sign, (1,)),
+                          N_PHI)[0]                                            # (M, n_nn)
+        K = spec.n_harmonics
+        k = jnp.arange(1, K + 1)
+        four = jnp.concatenate([jnp.ones(phi.shape + (1,)), jnp.cos(phi[..., None] * k),
+                                jnp.sin(phi[..., None] * k)], axis=-1)         # (..., M)
+        w = w + four @ (cols @ beta[n_mono:spec.n_map])
     if spec.control_scale is None or control is None:
         return w
     ua, ub = control[0], control[1]
     c, s = jnp.cos(phi), jnp.sin(phi)
     cols = jnp.stack([ua * c + ub * s, ub * c - ua * s], axis=-1)
     return w + cols @ beta[spec.n_map:spec.n_basis]
-
-
-def extrapolation_sd(mu, mu_data, length: float) -> np.ndarray:
-    r"""``c(μ) = √(1 − k_*ᵀ K⁻¹ k_*)``: a unit Gaussian process's sd at μ given zero at ``mu_data``.
-
-    Squared-exponential kernel ``k(μ, μ') = exp(−(μ − μ')²/2ℓ²)``; 0 at every
-    point of ``mu_data``, towards 1 far from them, 1 everywhere when ``mu_data``
-    is empty (module docstring, "Model error away from the recordings").
-
-    Args:
-        mu: Where, shape ``(n_mu,)``.
-        mu_data: The branch's training μ (repeats allowed), shape ``(m,)``.
-        length: Correlation length ``ℓ`` in units of μ.
-    """
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    x = np.unique(np.asarray(mu_data, dtype=float))
-    if x.size == 0:
-        return np.ones_like(mu)
-    K = np.exp(-0.5 * ((x[:, None] - x[None]) / length) ** 2)
-    ks = np.exp(-0.5 * ((x[:, None] - mu[None]) / length) ** 2)          # (m, n_mu)
-    explained = np.sum(ks * np.linalg.solve(K + 1e-10 * np.eye(x.size), ks), axis=0)
-    return np.sqrt(np.clip(1.0 - explained, 0.0, 1.0))
-

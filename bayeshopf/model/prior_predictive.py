@@ -76,8 +76,9 @@ def draw_data(spec: cm.CollapsedSpec, mu, sign, coeffs_se, key, omega_se=None) -
         omega_se: Standard errors of the frequencies ``(n_rec,)`` (0 if ``None``).
 
     Raises:
-        FitError: For a model without the discrepancy, or a design whose
-            shapes disagree.
+        FitError: For a model without the discrepancy, a design whose
+            shapes disagree, or (a network at infinite width) a design other
+            than the recordings ``spec.nn_training`` names.
     """
     if not spec.has_discrepancy:
         raise FitError("spec: a model with the discrepancy expected (its noise does not depend "
@@ -88,6 +89,12 @@ def draw_data(spec: cm.CollapsedSpec, mu, sign, coeffs_se, key, omega_se=None) -
     if sign.shape != mu.shape or se.shape != shape:
         raise FitError(f"design: mu {mu.shape}, sign {sign.shape} and coeffs_se {shape} "
                        f"expected; got sign {sign.shape} and coeffs_se {se.shape}")
+    if spec.nn_training is not None and not (
+            np.allclose(np.asarray(mu), spec.nn_training[0])
+            and np.allclose(np.asarray(sign), spec.nn_training[1])):
+        raise FitError("design: the recordings the model's infinite-width network was built on "
+                       f"expected (mu {list(spec.nn_training[0])}, sign "
+                       f"{list(spec.nn_training[1])}); got mu {np.asarray(mu).tolist()}")
     k_theta, k_beta, k_eps, k_gamma, k_omega = jax.random.split(key, 5)
     with handlers.seed(rng_seed=k_theta):
         trace = handlers.trace(_prior_sites).get_trace(spec)

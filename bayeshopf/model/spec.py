@@ -55,6 +55,10 @@ class CollapsedSpec:
             model of fits saved before the discrepancy existed).
         discrepancy_floor: ``κ`` of :func:`~bayeshopf.model.discrepancy.scales`
             (0: purely relative to the model's orbit).
+        nn_training: ``(μ, sign)`` of the training recordings when the network
+            is its infinite-width Gaussian process
+            (:mod:`bayeshopf.model.network_kernel`; ``nn_hidden`` is then empty),
+            or ``None`` for the network with the fixed hidden layer ``nn_hidden``.
     """
 
     criticality: str
@@ -73,6 +77,7 @@ class CollapsedSpec:
     control_scale: float | None = None
     discrepancy_scale: tuple | None = None
     discrepancy_floor: float = 0.0
+    nn_training: tuple | None = None
 
     @property
     def has_discrepancy(self) -> bool:
@@ -91,7 +96,14 @@ class CollapsedSpec:
     @property
     def n_map(self) -> int:
         """Number of the map's own basis functions (monomials and network)."""
-        return len(MONOMIALS) * len(MU_POWERS) + self.nn_hidden[0].shape[1]
+        return len(MONOMIALS) * len(MU_POWERS) + self.n_network
+
+    @property
+    def n_network(self) -> int:
+        """The network's columns: ``H`` hidden units, or ``n_train (2K+1)`` latents at H = ∞."""
+        if self.nn_training is None:
+            return int(np.shape(self.nn_hidden[0])[1])
+        return len(self.nn_training[0]) * (2 * self.n_harmonics + 1)
 
     def to_dict(self) -> dict:
         """JSON-serialisable form."""
@@ -110,6 +122,8 @@ class CollapsedSpec:
         if d.get("discrepancy_scale") is not None:
             d["discrepancy_scale"] = tuple(tuple(float(v) for v in row)
                                            for row in d["discrepancy_scale"])
+        if d.get("nn_training") is not None:
+            d["nn_training"] = tuple(tuple(float(v) for v in row) for row in d["nn_training"])
         return cls(**d)
 
 
