@@ -162,20 +162,24 @@ class HybridPosterior:
 
     def _network(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
         """:func:`network_draws` at μ for the draws of ``n_draws``, once per μ and branch."""
+        return self._memo("network", mu, branch, n_draws, lambda theta, idx, mu: network_draws(
+            self.spec, theta, mu, branch_sign(branch), self.seed))
+
+    @cached_property
+    def _discrepancy_memo(self) -> dict:
+        return {}
+
+    def _memo(self, what: str, mu, branch: str, n_draws: int | None, compute):
+        """``compute(θ of the draws, their indices, μ)``, once per ``what``, μ, branch and draws."""
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        key = ("network", mu.tobytes(), branch, n_draws)
+        key = (what, mu.tobytes(), branch, n_draws)
         memo = self._discrepancy_memo
         if key not in memo:
             if len(memo) >= 64:
                 memo.clear()
             idx = self._draw_indices(n_draws)
-            memo[key] = network_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                                      mu, branch_sign(branch), self.seed)
+            memo[key] = compute({k: v[idx] for k, v in self.theta.items()}, idx, mu)
         return memo[key]
-
-    @cached_property
-    def _discrepancy_memo(self) -> dict:
-        return {}
 
     def _discrepancy(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
         """:func:`discrepancy_draws` at μ for the draws of ``n_draws``, once per μ and branch.
@@ -183,17 +187,9 @@ class HybridPosterior:
         A prediction needs both its parts (the draw for the orbit, the
         independent variance for the noise); they come from one computation.
         """
-        mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        key = (mu.tobytes(), branch, n_draws)
-        memo = self._discrepancy_memo
-        if key not in memo:
-            if len(memo) >= 64:
-                memo.clear()
-            idx = self._draw_indices(n_draws)
-            memo[key] = discrepancy_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                                          self.run.betas[idx], self.features, mu,
-                                          branch_sign(branch), self.seed)
-        return memo[key]
+        return self._memo("discrepancy", mu, branch, n_draws, lambda theta, idx, mu:
+                          discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features,
+                                            mu, branch_sign(branch), self.seed))
 
     def recording_control(self, i: int):
         """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""

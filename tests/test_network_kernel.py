@@ -22,6 +22,7 @@ from bayeshopf.errors import FitError
 from bayeshopf.features.frame import PlanarFrame
 from bayeshopf.inference.settings import CollapsedSettings
 from bayeshopf.model import collapsed as cm
+from bayeshopf.model import discrepancy as dm
 from bayeshopf.model import network_kernel as nk
 
 ensure_x64()
@@ -102,7 +103,7 @@ def test_harmonic_kernel_is_the_brute_force_projection():
     m = X[:, 0, 2]
     C = np.asarray(nk.harmonic_kernel(jnp.asarray(s), jnp.asarray(m), jnp.asarray(s),
                                       jnp.asarray(m), K_HARM, cm.N_PHI))
-    h = nk.harmonic_of_coefficient(K_HARM)
+    h = dm.harmonic_index(K_HARM)
     want = np.zeros_like(dense)
     for k in range(M):                # diagonal in the coefficients, C_h per harmonic
         idx = np.arange(len(MU)) * M + k

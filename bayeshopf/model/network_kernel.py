@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bayeshopf.model.discrepancy import harmonic_index
 from bayeshopf.model.spec import CollapsedSpec, radius, reference_radius
 
 #: ``a²`` of ``ψ(z) = erf(a z)``, ``a = √π/2``: the erf with tanh's slope at 0.
@@ -62,13 +63,17 @@ ERF_SCALE2 = np.pi / 4.0
 JITTER = 1e-9
 
 
+def _arcsine(inner, sq_a, sq_b):
+    """``(2/π) arcsin(2a² x̃ᵀx̃' / √((1 + 2a²|x̃|²)(1 + 2a²|x̃'|²)))`` from the three products."""
+    c = 2.0 * ERF_SCALE2
+    return (2.0 / jnp.pi) * jnp.arcsin(c * inner / jnp.sqrt((1.0 + c * sq_a) * (1.0 + c * sq_b)))
+
+
 def kernel(xa, xb):
     r"""``k(x_a, x_b)`` (module docstring), shape ``(n_a, n_b)`` for ``x`` of shape ``(n, 3)``."""
-    s = 2.0 * ERF_SCALE2
-    na = 1.0 + s * (1.0 + jnp.sum(xa * xa, axis=-1))
-    nb = 1.0 + s * (1.0 + jnp.sum(xb * xb, axis=-1))
-    inner = s * (1.0 + xa @ xb.T)
-    return (2.0 / jnp.pi) * jnp.arcsin(inner / jnp.sqrt(na[:, None] * nb[None, :]))
+    sq_a = 1.0 + jnp.sum(xa * xa, axis=-1)
+    sq_b = 1.0 + jnp.sum(xb * xb, axis=-1)
+    return _arcsine(1.0 + xa @ xb.T, sq_a[:, None], sq_b[None, :])
 
 
 def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
@@ -76,13 +81,11 @@ def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
 
     ``s``: the orbits' radii ``r / r_ref``; ``m``: their ``μ̃``.
     """
-    c = 2.0 * ERF_SCALE2
     delta = 2 * np.pi * np.arange(n_phi) / n_phi
-    na = 1.0 + c * (1.0 + s_a**2 + m_a**2)
-    nb = 1.0 + c * (1.0 + s_b**2 + m_b**2)
-    inner = c * (1.0 + (s_a[:, None] * s_b[None])[..., None] * np.cos(delta)
-                 + (m_a[:, None] * m_b[None])[..., None])                     # (n_a, n_b, N)
-    g = (2.0 / jnp.pi) * jnp.arcsin(inner / jnp.sqrt(na[:, None] * nb[None])[..., None])
+    inner = (1.0 + (s_a[:, None] * s_b[None])[..., None] * np.cos(delta)
+             + (m_a[:, None] * m_b[None])[..., None])                         # (n_a, n_b, N)
+    g = _arcsine(inner, (1.0 + s_a**2 + m_a**2)[:, None, None],
+                 (1.0 + s_b**2 + m_b**2)[None, :, None])
     h = np.arange(n_harmonics + 1)
     w = np.where(h[:, None] == 0, 1.0, 2.0) / n_phi * np.cos(h[:, None] * delta)  # (K+1, N)
     return jnp.einsum("hn,abn->hab", w, g)
@@ -92,12 +95,6 @@ def _orbit_coordinates(spec: CollapsedSpec, theta: dict, mu, sign):
     """``(s, μ̃)`` of the orbits at ``(mu, sign)``: the network's circles."""
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
     return s, jnp.broadcast_to(spec.mu_tilde(mu), jnp.shape(s))
-
-
-def harmonic_of_coefficient(n_harmonics: int) -> np.ndarray:
-    """The harmonic of each coefficient ``[a_0, a_1..a_K, b_1..b_K]``: ``[0, 1..K, 1..K]``."""
-    k = np.arange(1, n_harmonics + 1)
-    return np.concatenate([[0], k, k])
 
 
 def training_factor(spec: CollapsedSpec, theta: dict, n_phi: int):
@@ -112,10 +109,19 @@ def training_factor(spec: CollapsedSpec, theta: dict, n_phi: int):
 
 def _per_coefficient(V, n_harmonics: int):
     """``(K+1, n_tr, n)`` per harmonic → design columns ``(n, M, M n_tr)`` (coefficient-major)."""
-    Vk = V[harmonic_of_coefficient(n_harmonics)]                              # (M, n_tr, n)
+    Vk = V[harmonic_index(n_harmonics)]                              # (M, n_tr, n)
     M = Vk.shape[0]
     cols = jnp.einsum("kmj,kl->jklm", Vk, jnp.eye(M))                         # (n, M, M, n_tr)
     return cols.reshape(cols.shape[0], M, -1)
+
+
+def _solved(spec: CollapsedSpec, theta: dict, mu, sign, n_phi: int):
+    """``V_h = L_h⁻¹ c_{h*}`` ``(K+1, n_tr, n)`` at orbits ``(mu, sign)``, and their ``(s, μ̃)``."""
+    L, s_tr, m_tr = training_factor(spec, theta, n_phi)
+    s, m = _orbit_coordinates(spec, theta, mu, sign)
+    Cs = harmonic_kernel(s_tr, m_tr, s, m, spec.n_harmonics, n_phi)          # (K+1, n_tr, n)
+    V = jax.vmap(lambda a, b: jax.scipy.linalg.solve_triangular(a, b, lower=True))(L, Cs)
+    return V, s, m
 
 
 def columns(spec: CollapsedSpec, theta: dict, mu, sign, n_phi: int, *, training: bool = False):
@@ -126,13 +132,10 @@ def columns(spec: CollapsedSpec, theta: dict, mu, sign, n_phi: int, *, training:
     coefficients there. ``training``: the orbits are the training ones
     (``spec.nn_training``), whose columns are ``L_h``'s rows (exactly).
     """
-    L, s_tr, m_tr = training_factor(spec, theta, n_phi)
     if training:
+        L = training_factor(spec, theta, n_phi)[0]
         return _per_coefficient(jnp.swapaxes(L, 1, 2), spec.n_harmonics)
-    s, m = _orbit_coordinates(spec, theta, mu, sign)
-    Cs = harmonic_kernel(s_tr, m_tr, s, m, spec.n_harmonics, n_phi)          # (K+1, n_tr, n)
-    V = jax.vmap(lambda a, b: jax.scipy.linalg.solve_triangular(a, b, lower=True))(L, Cs)
-    return _per_coefficient(V, spec.n_harmonics)
+    return _per_coefficient(_solved(spec, theta, mu, sign, n_phi)[0], spec.n_harmonics)
 
 
 def conditional_var(spec: CollapsedSpec, theta: dict, mu, sign, n_phi: int):
@@ -141,11 +144,8 @@ def conditional_var(spec: CollapsedSpec, theta: dict, mu, sign, n_phi: int):
     The variance of the network's coefficients there given the training ones,
     per unit ``ρ² τ_s²``; independent between coefficients (module docstring).
     """
-    L, s_tr, m_tr = training_factor(spec, theta, n_phi)
-    s, m = _orbit_coordinates(spec, theta, mu, sign)
-    Cs = harmonic_kernel(s_tr, m_tr, s, m, spec.n_harmonics, n_phi)
-    V = jax.vmap(lambda a, b: jax.scipy.linalg.solve_triangular(a, b, lower=True))(L, Cs)
+    V, s, m = _solved(spec, theta, mu, sign, n_phi)
     own = jax.vmap(lambda a, b: harmonic_kernel(a[None], b[None], a[None], b[None],
                                                 spec.n_harmonics, n_phi)[:, 0, 0])(s, m)  # (n, K+1)
     var = jnp.maximum(own - jnp.sum(V * V, axis=1).T, 0.0)                   # (n, K+1)
-    return var[:, harmonic_of_coefficient(spec.n_harmonics)]
+    return var[:, harmonic_index(spec.n_harmonics)]
