@@ -98,7 +98,8 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
                          frequency=settings.frequency, control=settings.control,
                          discrepancy=settings.discrepancy,
                          discrepancy_floor=settings.discrepancy_floor,
-                         nn_seed=settings.nn_seed)
+                         nn_seed=settings.nn_seed,
+                         nn_mu_scale_learned=settings.nn_mu_scale_learned)
     inputs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

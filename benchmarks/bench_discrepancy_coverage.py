@@ -2,7 +2,8 @@
 
 Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs paired,short,sweep]
 [--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for chosen seeds); ``--summary
-[FIRST LAST] [--seeds …]`` prints the table of what finished.
+[FIRST LAST] [--seeds …] [--models …]`` prints the table of what finished, over the
+sets that every listed model fitted, with each coverage's 90% Clopper–Pearson interval.
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
@@ -11,7 +12,8 @@ the truth is that system's own continuation). It is recorded in three designs,
 then fitted by each model of :data:`MODELS` (``plain``: without the model
 discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
 ``kernel_plain``: the same two with the map's network at infinite width,
-``nn_width=None``; every other setting the default):
+``nn_width=None``; ``kernel_scale``: ``kernel`` with the network's input scale
+on μ learned; every other setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -49,7 +51,8 @@ DESIGNS = {
 MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "discrepancy": dict(discrepancy=True, nn_width=16),
           "kernel": dict(discrepancy=True, nn_width=None),
-          "kernel_plain": dict(discrepancy=False, nn_width=None)}
+          "kernel_plain": dict(discrepancy=False, nn_width=None),
+          "kernel_scale": dict(discrepancy=True, nn_width=None, nn_mu_scale_learned=True)}
 NOISE = 0.015
 ALPHA = 0.1
 
@@ -133,23 +136,38 @@ def run(seeds, designs, models) -> None:
                                         if k in row}, f"{res.get('wall_s', 0):.0f} s", flush=True)
 
 
-def summary(seeds=None) -> None:
+def clopper_pearson(k: int, n: int, level: float = 0.9) -> tuple[float, float]:
+    """The central ``level`` Clopper–Pearson interval of a binomial proportion ``k/n``."""
+    from scipy.stats import beta
+
+    a = (1 - level) / 2
+    return (float(beta.ppf(a, k, n - k + 1)) if k > 0 else 0.0,
+            float(beta.ppf(1 - a, k + 1, n - k)) if k < n else 1.0)
+
+
+def summary(seeds=None, models=None) -> None:
+    """The table of what finished: per design, the sets every listed model fitted."""
     rows = [json.loads(x) for x in OUT.read_text().splitlines()] if OUT.exists() else []
     rows = [r for r in rows if "mu0" in r and (seeds is None or r["seed"] in seeds)]
-    print("| design | model | sets | μ0 inside | μ0 width | μ0 score | fold inside | "
-          "fold width | fold score |")
+    models = models or list(MODELS)
+    print("| design | model | sets | μ0 inside (90% CP) | μ0 width | μ0 score | "
+          "fold inside (90% CP) | fold width | fold score |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for design in DESIGNS:
-        for model in MODELS:
-            sub = [r for r in rows if r["design"] == design and r["model"] == model]
+        by = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
+        common = sorted({s for s, _ in by if all((s, m) in by for m in models)})
+        for model in models:
+            sub = [by[(s, model)] for s in common]
             if not sub:
                 continue
             cells = []
             for k in ("mu0", "mu_fold"):
                 inside = sum(r[k]["inside"] for r in sub)
+                lo, hi = clopper_pearson(inside, len(sub))
                 width = np.mean([r[k]["hi"] - r[k]["lo"] for r in sub])
                 score = np.mean([r[k]["score"] for r in sub])
-                cells += [f"{inside}/{len(sub)}", f"{width:.3f}", f"{score:.3f}"]
+                cells += [f"{inside}/{len(sub)} ({lo:.2f}–{hi:.2f})", f"{width:.3f}",
+                          f"{score:.3f}"]
             print(f"| {design} | {model} | {len(sub)} | " + " | ".join(cells) + " |")
 
 
@@ -165,17 +183,17 @@ def main(argv):
     bounds = [int(a) for a in argv[:2] if a.isdigit()]
     if seeds is None and len(bounds) == 2:
         seeds = list(range(bounds[0], bounds[1] + 1))
-    if "--summary" in argv:
-        summary(None if seeds is None else set(seeds))
-        return
     designs = (argv[argv.index("--designs") + 1].split(",") if "--designs" in argv
                else list(DESIGNS))
     models = (argv[argv.index("--models") + 1].split(",") if "--models" in argv
-              else ["plain", "discrepancy"])
-    unknown = [m for m in models if m not in MODELS]
+              else None)
+    unknown = [m for m in models or () if m not in MODELS]
     if unknown:
         sys.exit(f"--models: expected some of {', '.join(MODELS)}; got {', '.join(unknown)}")
-    run(seeds, designs, models)
+    if "--summary" in argv:
+        summary(None if seeds is None else set(seeds), models)
+        return
+    run(seeds, designs, models or ["plain", "discrepancy"])
 
 
 if __name__ == "__main__":

@@ -95,6 +95,44 @@ def test_kernel_is_the_erf_networks_covariance():
     assert np.abs(np.asarray(nk.kernel(x, x)) - mc).max() < 4.0 / np.sqrt(H)
 
 
+def _kernel_with_weight_variances(xa, xb, var):
+    """Williams's erf kernel for weights ``w ~ N(0, diag(var))`` and a unit bias, written here."""
+    c = np.pi / 2
+    inner = 1.0 + (xa * var) @ xb.T
+    na = 1.0 + np.sum(xa * xa * var, axis=-1)
+    nb = 1.0 + np.sum(xb * xb * var, axis=-1)
+    return 2 / np.pi * np.arcsin(c * inner / np.sqrt((1 + c * na)[:, None] * (1 + c * nb)[None]))
+
+
+def test_learned_mu_scale_is_the_kernel_of_a_wider_weight_on_mu():
+    nu = 2.7
+    var = np.array([1.0, 1.0, nu**2])
+    rng = np.random.default_rng(8)
+    x = rng.normal(0.0, 0.6, (5, 3))
+    H = 400_000
+    W = rng.standard_normal((3, H)) * np.sqrt(var)[:, None]
+    F = erf(np.sqrt(np.pi) / 2 * (x @ W + rng.standard_normal(H)))
+    assert np.abs(_kernel_with_weight_variances(x, x, var) - F @ F.T / H).max() < 4.0 / np.sqrt(H)
+    # the training factor of a spec with the learned scale is that kernel's projection
+    spec = dataclasses.replace(_spec(), nn_mu_scale_learned=True)
+    theta = dict(_theta(), nu_mu=nu)
+    X = _points(spec, theta, MU, SIGN)
+    P = cm.projection(K_HARM)
+    k = _kernel_with_weight_variances(X.reshape(-1, 3), X.reshape(-1, 3), var)
+    k = k.reshape(X.shape[0], X.shape[1], X.shape[0], X.shape[1])
+    dense = np.einsum("kn,anbm,lm->akbl", P, k, P)            # (n, M, n, M)
+    L = np.asarray(nk.training_factor(spec, theta, cm.N_PHI)[0])
+    h = dm.harmonic_index(K_HARM)
+    for kk in range(M):
+        C = L[h[kk]] @ L[h[kk]].T
+        want = dense[:, kk, :, kk]
+        want = want + nk.JITTER * np.mean(np.diag(want)) * np.eye(len(MU))
+        np.testing.assert_allclose(C, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    # and it is not the unit scale's
+    L1 = np.asarray(nk.training_factor(_spec(), theta, cm.N_PHI)[0])
+    assert np.abs(L1[1] @ L1[1].T - L[1] @ L[1].T).max() > 1e-3 * np.abs(L[1]).max() ** 2
+
+
 def test_harmonic_kernel_is_the_brute_force_projection():
     spec, theta = _spec(), _theta()
     X = _points(spec, theta, MU, SIGN)
@@ -187,3 +225,7 @@ def test_spec_round_trips_and_settings_refuse_bad_widths():
         with pytest.raises(FitError, match="nn_width"):
             CollapsedSettings(nn_width=bad)
     assert CollapsedSettings(nn_width=None).nn_width is None
+    with pytest.raises(FitError, match="nn_mu_scale_learned.*infinite width"):
+        CollapsedSettings(nn_width=16, nn_mu_scale_learned=True)
+    learned = dataclasses.replace(spec, nn_mu_scale_learned=True)
+    assert cm.CollapsedSpec.from_dict(learned.to_dict()).nn_mu_scale_learned

@@ -121,6 +121,8 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
             "sigma_rel": post.interval("sigma_rel").to_json(),
             "relative": interval(total).to_json()}
         d["fit"]["sigma_rel"] = float(np.median(total))
+    if post.spec.nn_mu_scale_learned:
+        d["fit"]["nn_mu_scale"] = post.interval("nu_mu").to_json()
     if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
                                         or not post.spec.has_discrepancy):
         d["fit"]["extrapolation_scale"] = {

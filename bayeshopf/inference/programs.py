@@ -23,6 +23,7 @@ from bayeshopf.inference.cache import compile_ahead, compiled_function, on_relea
 from bayeshopf.inference.settings import ModelInputs
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import discrepancy as dm
+from bayeshopf.model import network_kernel as nk
 
 
 def model_key(inputs: ModelInputs) -> tuple:
@@ -46,6 +47,8 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
     if spec.has_discrepancy:
         v["eta"] = 0.5 * dm.ETA_PRIOR
         v["ell"] = dm.LENGTH_PRIOR[0]
+    if spec.nn_mu_scale_learned:
+        v["nu_mu"] = nk.NU_PRIOR[0]
     if spec.criticality == "subcritical":
         v["gap_fold"] = 0.3 * spec.mu_span
         if spec.unfolding == "curved":

@@ -15,6 +15,13 @@ covariance ``ρ² τ_s² k(x, x')``, ``k(x, x') = E[ψ(wᵀx + b) ψ(wᵀx' + b)
 
 It has no draw of a hidden layer, so nothing in a fit depends on one.
 
+**Its scale in μ.** ``μ̃`` spans one unit over the recordings, so with unit
+input weights the network varies in μ only on the scale of the whole span.
+With ``spec.nn_mu_scale_learned`` the weight on ``μ̃`` is ``N(0, ν²)``, which is
+the kernel above at ``(ũ1, ũ2, ν μ̃)``; ``ν`` is sampled with the normal form
+(site ``nu_mu``, prior :data:`NU_PRIOR`), so the data choose how fast the map
+may bend in μ and how fast a prediction's spread grows away from the recordings.
+
 **On the orbits.** The data see the network through each recording's harmonic
 coefficients ``f_i = P NN(x_i(φ_n))`` over the ``N`` phases of its orbit
 ``x_i(φ) = (s_i \cos φ, s_i \sin φ, μ̃_i)`` (``P`` the Fourier projection of
@@ -57,6 +64,8 @@ from bayeshopf.model.spec import CollapsedSpec, radius, reference_radius
 
 #: ``a²`` of ``ψ(z) = erf(a z)``, ``a = √π/2``: the erf with tanh's slope at 0.
 ERF_SCALE2 = np.pi / 4.0
+#: Log-normal prior of ``ν``, the network's input scale on ``μ̃`` (median, log-sd).
+NU_PRIOR = (2.0, 0.75)
 #: ``ε_h`` relative to the mean of ``C_h``'s diagonal: a smooth function's high
 #: harmonics are tiny and nearly the same on nearby orbits, so ``C_h`` is
 #: numerically singular without it.
@@ -79,7 +88,7 @@ def kernel(xa, xb):
 def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
     """``C_h(a, b)`` for ``h = 0..K`` (module docstring), ``(K+1, n_a, n_b)``.
 
-    ``s``: the orbits' radii ``r / r_ref``; ``m``: their ``μ̃``.
+    ``s``: the orbits' radii ``r / r_ref``; ``m``: their ``μ̃`` (times ``ν``).
     """
     delta = 2 * np.pi * np.arange(n_phi) / n_phi
     inner = (1.0 + (s_a[:, None] * s_b[None])[..., None] * np.cos(delta)
@@ -92,9 +101,10 @@ def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
 
 
 def _orbit_coordinates(spec: CollapsedSpec, theta: dict, mu, sign):
-    """``(s, μ̃)`` of the orbits at ``(mu, sign)``: the network's circles."""
+    """``(s, ν μ̃)`` of the orbits at ``(mu, sign)``: the network's circles."""
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
-    return s, jnp.broadcast_to(spec.mu_tilde(mu), jnp.shape(s))
+    m = spec.mu_tilde(mu) * (theta["nu_mu"] if spec.nn_mu_scale_learned else 1.0)
+    return s, jnp.broadcast_to(m, jnp.shape(s))
 
 
 def training_factor(spec: CollapsedSpec, theta: dict, n_phi: int):
