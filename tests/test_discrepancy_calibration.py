@@ -307,6 +307,38 @@ def test_parameters_are_named_off_at_a_family_wise_level():
     assert post(-0.03, pinned=z_c**2 + 0.1).off
 
 
+def test_a_parameter_is_off_only_beyond_its_declared_tolerance():
+    """Most of the posterior must lie outside nominal·(1 ± tolerance), not only away from nominal."""
+    from bayeshopf.discrepancy.records import posteriors
+    from bayeshopf.simulators.base import SimulationError, UncertainParameter
+
+    u = UncertainParameter("k_h", "lognormal", 0.1, tolerance=0.02)
+    sigma = np.sqrt(np.log(1.01))              # the coordinate's log scale, written here
+    nominal = 2.0
+    sd = 0.01
+
+    def posterior(shift):                      # a posterior whose median is nominal·(1 + shift)
+        z = np.log1p(shift) / sigma
+        return posteriors([u], np.array([nominal]), ["N/m"], np.array([z]),
+                          np.array([[sd**2]]))[0]
+
+    for shift in (-0.05, -0.021, -0.005, 0.005, 0.015, 0.03):
+        p = posterior(shift)
+        log_med = np.log1p(shift)              # the posterior of log θ/θ0: N(log_med, (σ sd)²)
+        want = (stats.norm.cdf((np.log(0.98) - log_med) / (sigma * sd))
+                + stats.norm.sf((np.log(1.02) - log_med) / (sigma * sd)))
+        assert p.p_beyond_tolerance == pytest.approx(want, abs=1e-12)
+        assert p.off == (abs(shift) > 0.02), shift        # all are far from nominal in sd
+    assert abs(posterior(-0.005).z) > 2.61 * sd           # a point null would name it off
+    no_tol = posteriors([UncertainParameter("k_h", "lognormal", 0.1)], np.array([nominal]),
+                        ["N/m"], np.array([np.log1p(-0.005) / sigma]), np.array([[sd**2]]))[0]
+    assert no_tol.off and no_tol.p_beyond_tolerance == pytest.approx(1.0)
+    assert FLUTTER3DOF.uncertain[0].tolerance == 0.01
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(SimulationError, match="tolerance"):
+            UncertainParameter("k_h", tolerance=bad)
+
+
 # ------------------------------------------------------- blind analyses (slow)
 
 PLAN = [(15.75, "stable"), (16.75, "stable"), (15.75, "unstable"), (16.75, "unstable")]

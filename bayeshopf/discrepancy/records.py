@@ -73,6 +73,9 @@ class ParameterPosterior:
             profile-likelihood check of "off"; ``None``: not checked).
         z_off: How many posterior standard deviations from nominal name it off
             (:func:`off_threshold`; :data:`Z90`: its 90% interval).
+        tolerance: The simulator's declared relative tolerance
+            (:attr:`~bayeshopf.simulators.base.UncertainParameter.tolerance`).
+        tolerance_z: The band ``nominal · (1 ± tolerance)`` in ``z``.
     """
 
     name: str
@@ -86,18 +89,37 @@ class ParameterPosterior:
     z_sd: float
     pinned: float | None = None
     z_off: float = Z90
+    tolerance: float = 0.0
+    tolerance_z: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def p_beyond_tolerance(self) -> float:
+        r"""Posterior mass beyond the declared tolerance, :math:`P(z \notin [z_-, z_+])`.
+
+        With the posterior :math:`N(\hat z, \mathrm{sd}^2)` of the coordinate:
+        :math:`\Phi((z_- - \hat z)/\mathrm{sd}) + \Phi((\hat z - z_+)/\mathrm{sd})`.
+        """
+        lo, hi = self.tolerance_z
+        if self.z_sd <= 0:
+            return float(not lo <= self.z <= hi)
+        return float(stats.norm.cdf((lo - self.z) / self.z_sd)
+                     + stats.norm.cdf((self.z - hi) / self.z_sd))
 
     @property
     def off(self) -> bool:
-        r"""Whether the posterior puts nominal more than :attr:`z_off` standard deviations away.
+        r"""Whether the data put the parameter off: beyond its tolerance, and not by chance.
 
-        :math:`|\hat z| > z_{\rm off}\,\mathrm{sd}` (the nominal value is
-        :math:`z = 0`); where :func:`~bayeshopf.discrepancy.fitting.check_off` checked it,
-        pinning the parameter at
-        nominal must also cost more than :math:`z_{\rm off}^2` in :math:`-2\log p`.
+        Three conditions: most of the posterior lies beyond the simulator's
+        declared tolerance (:attr:`p_beyond_tolerance` > 1/2; with tolerance 0,
+        the median is not nominal); the posterior puts nominal more than
+        :attr:`z_off` standard deviations away,
+        :math:`|\hat z| > z_{\rm off}\,\mathrm{sd}` (nominal is :math:`z = 0`;
+        the family-wise level of :func:`off_threshold`); and, where
+        :func:`~bayeshopf.discrepancy.fitting.check_off` checked it, pinning the
+        parameter at nominal costs more than :math:`z_{\rm off}^2` in :math:`-2\log p`.
         """
-        return abs(self.z) > self.z_off * self.z_sd and (self.pinned is None
-                                                        or self.pinned > self.z_off**2)
+        return (self.p_beyond_tolerance > 0.5 and abs(self.z) > self.z_off * self.z_sd
+                and (self.pinned is None or self.pinned > self.z_off**2))
 
     @property
     def shift(self) -> float:
@@ -110,7 +132,8 @@ class ParameterPosterior:
                 "prior_scale": self.prior_scale, "nominal": self.nominal,
                 "median": self.median, "ci90": list(self.ci90), "shift": self.shift,
                 "off": self.off, "z": self.z, "z_sd": self.z_sd, "z_off": self.z_off,
-                "pinned": self.pinned}
+                "pinned": self.pinned, "tolerance": self.tolerance,
+                "p_beyond_tolerance": self.p_beyond_tolerance}
 
 
 @dataclass(frozen=True)
@@ -441,9 +464,12 @@ def posteriors(unc: Sequence[UncertainParameter], nominal: np.ndarray, units: Se
     for j, u in enumerate(unc):
         sd = float(np.sqrt(max(cov[j, j], 0.0)))
         lo, hi = (float(u.value(z[j] + s * Z90 * sd, nominal[j])) for s in (-1, 1))
+        band = sorted(float(u.coordinate(nominal[j] * (1.0 + s * u.tolerance), nominal[j]))
+                      for s in (-1, 1))
         out.append(ParameterPosterior(
             name=u.name, units=units[j], prior=u.prior, prior_scale=u.scale,
             nominal=float(nominal[j]), median=float(u.value(z[j], nominal[j])),
-            ci90=(min(lo, hi), max(lo, hi)), z=float(z[j]), z_sd=sd, z_off=z_off))
+            ci90=(min(lo, hi), max(lo, hi)), z=float(z[j]), z_sd=sd, z_off=z_off,
+            tolerance=u.tolerance, tolerance_z=(band[0], band[1])))
     return tuple(out)
 

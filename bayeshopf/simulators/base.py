@@ -121,16 +121,22 @@ class UncertainParameter:
             coefficient that must keep its sign) or ``"normal"``.
         scale: Relative standard deviation :math:`s` (0.1 for ±10%).
         description: Why this width (one sentence, for reports).
+        tolerance: Relative error within which the simulator's value counts as
+            right (0.01: ±1%): a calibration names the parameter off only when
+            most of its posterior lies beyond it
+            (:attr:`~bayeshopf.discrepancy.records.ParameterPosterior.off`).
+            0: any shift the data resolve.
 
     Raises:
-        SimulationError: If ``prior`` is not one of :data:`PRIORS`, or
-            ``scale`` is not a finite number > 0.
+        SimulationError: If ``prior`` is not one of :data:`PRIORS`, ``scale``
+            is not a finite number > 0, or ``tolerance`` not one in [0, 1).
     """
 
     name: str
     prior: str = "lognormal"
     scale: float = 0.1
     description: str = ""
+    tolerance: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -144,6 +150,12 @@ class UncertainParameter:
             raise SimulationError(f"UncertainParameter {self.name}: scale (relative standard "
                                   f"deviation) must be a finite number > 0; got {self.scale!r}")
         object.__setattr__(self, "scale", scale)
+        tol = float(self.tolerance)
+        if not (np.isfinite(tol) and 0.0 <= tol < 1.0):
+            raise SimulationError(f"UncertainParameter {self.name}: tolerance (relative error "
+                                  f"that counts as right) must be a number in [0, 1); got "
+                                  f"{self.tolerance!r}")
+        object.__setattr__(self, "tolerance", tol)
 
     @property
     def sigma(self) -> float:
