@@ -183,11 +183,12 @@ def _markdown_calibrated(d: dict) -> str:
     lines = [f"# Discrepancy analysis: {d['simulator']}", "",
              f"**Verdict ({v['kind']}{prob}).** {v['sentence']}", "",
              f"## Uncertain parameters ({d['parameters']['model']})", "",
-             "| parameter | units | nominal | median | 90% interval | shift | off |",
-             "|---|---|---:|---:|---|---:|---|"]
+             "| parameter | units | nominal | median | 90% interval | shift | tolerance | off |",
+             "|---|---|---:|---:|---|---:|---:|---|"]
     for p in d["parameters"]["table"]:
         lines.append(f"| {p['name']} | {p['units']} | {p['nominal']:.5g} | {p['median']:.5g} | "
                      f"{p['ci90'][0]:.5g} – {p['ci90'][1]:.5g} | {100 * p['shift']:+.2f}% | "
+                     f"±{100 * p.get('tolerance', 0.0):.3g}% | "
                      f"{'**yes**' if p['off'] else 'no'} |")
     lines += ["", "## Models (most probable terms)", "",
               "| model | probability | log evidence | coefficient median | 90% interval | "
