@@ -1,7 +1,7 @@
 """Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
 
 Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters] [--label L]
-[--out FILE]``
+[--out FILE] [--fit-args "--discrepancy --nn-width inf"]``
 on an otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
 (``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
 cache the cold run filled. Prints a Markdown table and writes
@@ -16,6 +16,8 @@ quotes): with ``PYTHONPATH`` naming a checkout of
 another commit (``git worktree add``), the CLI runs that commit's code, so two
 versions can be timed in turns on the same machine (``BAYESHOPF_EXE`` names the
 console script to run, where that commit's entry point is not the installed one).
+``--fit-args`` adds options to every ``fit`` and ``demo`` (a model other than the
+default's; use it with ``--label``).
 """
 
 import json
@@ -49,16 +51,18 @@ def timed(args, cache, xla_flags):
             "stages_s": summary.get("timings_s", {})}
 
 
-def main(repeat=1, fusion_emitters=False, label=None, out=None):
+def main(repeat=1, fusion_emitters=False, label=None, out=None, fit_args=()):
     flags = os.environ.get("XLA_FLAGS", "")
     if fusion_emitters:
         flags = f"{flags} --xla_cpu_use_fusion_emitters=true".strip()
     rows = []
     for _ in range(repeat):
         cache = Path(tempfile.mkdtemp())
-        rows.append({"case": "fit rig, cold", **timed(["fit", str(RIG)], cache, flags)})
-        rows.append({"case": "fit rig, warm", **timed(["fit", str(RIG)], cache, flags)})
-        rows.append({"case": "demo, cold", **timed(["demo"], Path(tempfile.mkdtemp()), flags)})
+        rig = ["fit", str(RIG), *fit_args]
+        rows.append({"case": "fit rig, cold", **timed(rig, cache, flags)})
+        rows.append({"case": "fit rig, warm", **timed(rig, cache, flags)})
+        rows.append({"case": "demo, cold", **timed(["demo", *fit_args], Path(tempfile.mkdtemp()),
+                                                    flags)})
     path = (RESULTS_DIR / f"cli_speed_{label}.json" if label else
             RESULTS_DIR / "cli_speed_fusion_emitters.json" if fusion_emitters else
             HERE / "cli_speed.json")
@@ -80,4 +84,6 @@ if __name__ == "__main__":
     main(int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 1,
          fusion_emitters="--fusion-emitters" in sys.argv,
          label=sys.argv[sys.argv.index("--label") + 1] if "--label" in sys.argv else None,
-         out=sys.argv[sys.argv.index("--out") + 1] if "--out" in sys.argv else None)
+         out=sys.argv[sys.argv.index("--out") + 1] if "--out" in sys.argv else None,
+         fit_args=(sys.argv[sys.argv.index("--fit-args") + 1].split()
+                   if "--fit-args" in sys.argv else ()))
