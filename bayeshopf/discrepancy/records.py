@@ -110,8 +110,8 @@ class ParameterPosterior:
         r"""Whether the data put the parameter off: beyond its tolerance, and not by chance.
 
         Three conditions: most of the posterior lies beyond the simulator's
-        declared tolerance (:attr:`p_beyond_tolerance` > 1/2; with tolerance 0,
-        the median is not nominal); the posterior puts nominal more than
+        declared tolerance (:attr:`p_beyond_tolerance` > 1/2; with tolerance 0
+        that mass is 1 and the other two decide); the posterior puts nominal more than
         :attr:`z_off` standard deviations away,
         :math:`|\hat z| > z_{\rm off}\,\mathrm{sd}` (nominal is :math:`z = 0`;
         the family-wise level of :func:`off_threshold`); and, where
