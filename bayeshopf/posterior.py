@@ -99,7 +99,7 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
                          discrepancy=settings.discrepancy,
                          discrepancy_floor=settings.discrepancy_floor,
                          nn_seed=settings.nn_seed,
-                         nn_mu_scale_learned=settings.nn_mu_scale_learned)
+                         nn_mu_scale=settings.nn_mu_scale)
     inputs = ci.model_arguments(spec, features)
     timings["features"] = timings.get("features", 0.0) + time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -13,7 +13,7 @@ then fitted by each model of :data:`MODELS` (``plain``: without the model
 discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
 ``kernel_plain``: the same two with the map's network at infinite width,
 ``nn_width=None``; ``kernel_scale``: ``kernel`` with the network's input scale
-on μ learned; every other setting the default):
+on μ learned; ``kernel_nu3``: that scale fixed at 3; every other setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -52,7 +52,8 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "discrepancy": dict(discrepancy=True, nn_width=16),
           "kernel": dict(discrepancy=True, nn_width=None),
           "kernel_plain": dict(discrepancy=False, nn_width=None),
-          "kernel_scale": dict(discrepancy=True, nn_width=None, nn_mu_scale_learned=True)}
+          "kernel_scale": dict(discrepancy=True, nn_width=None, nn_mu_scale=None),
+          "kernel_nu3": dict(discrepancy=True, nn_width=None, nn_mu_scale=3.0)}
 NOISE = 0.015
 ALPHA = 0.1
 

@@ -45,7 +45,7 @@ def main(argv):
         w = argv[argv.index("--nn-width") + 1]
         settings = replace(settings, nn_width=None if w == "inf" else int(w))
     if "--learn-mu-scale" in argv:
-        settings = replace(settings, nn_mu_scale_learned=True)
+        settings = replace(settings, nn_mu_scale=None)
     if "--floor" in argv:
         settings = replace(settings, discrepancy_floor=float(argv[argv.index("--floor") + 1]))
     rs = load_recordings(RIG)

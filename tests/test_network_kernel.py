@@ -114,7 +114,7 @@ def test_learned_mu_scale_is_the_kernel_of_a_wider_weight_on_mu():
     F = erf(np.sqrt(np.pi) / 2 * (x @ W + rng.standard_normal(H)))
     assert np.abs(_kernel_with_weight_variances(x, x, var) - F @ F.T / H).max() < 4.0 / np.sqrt(H)
     # the training factor of a spec with the learned scale is that kernel's projection
-    spec = dataclasses.replace(_spec(), nn_mu_scale_learned=True)
+    spec = dataclasses.replace(_spec(), nn_mu_scale=None)
     theta = dict(_theta(), nu_mu=nu)
     X = _points(spec, theta, MU, SIGN)
     P = cm.projection(K_HARM)
@@ -128,6 +128,10 @@ def test_learned_mu_scale_is_the_kernel_of_a_wider_weight_on_mu():
         want = dense[:, kk, :, kk]
         want = want + nk.JITTER * np.mean(np.diag(want)) * np.eye(len(MU))
         np.testing.assert_allclose(C, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    # a fixed scale is the same kernel
+    fixed = np.asarray(nk.training_factor(dataclasses.replace(_spec(), nn_mu_scale=nu),
+                                          _theta(), cm.N_PHI)[0])
+    np.testing.assert_allclose(fixed, L, rtol=1e-12, atol=1e-15)
     # and it is not the unit scale's
     L1 = np.asarray(nk.training_factor(_spec(), theta, cm.N_PHI)[0])
     assert np.abs(L1[1] @ L1[1].T - L[1] @ L[1].T).max() > 1e-3 * np.abs(L[1]).max() ** 2
@@ -225,7 +229,11 @@ def test_spec_round_trips_and_settings_refuse_bad_widths():
         with pytest.raises(FitError, match="nn_width"):
             CollapsedSettings(nn_width=bad)
     assert CollapsedSettings(nn_width=None).nn_width is None
-    with pytest.raises(FitError, match="nn_mu_scale_learned.*infinite width"):
-        CollapsedSettings(nn_width=16, nn_mu_scale_learned=True)
-    learned = dataclasses.replace(spec, nn_mu_scale_learned=True)
-    assert cm.CollapsedSpec.from_dict(learned.to_dict()).nn_mu_scale_learned
+    with pytest.raises(FitError, match="nn_mu_scale.*infinite width"):
+        CollapsedSettings(nn_width=16, nn_mu_scale=None)
+    for bad in (0.0, -1.0, True, float("inf")):
+        with pytest.raises(FitError, match="nn_mu_scale: a positive number"):
+            CollapsedSettings(nn_width=None, nn_mu_scale=bad)
+    for v in (None, 3.0):
+        back = cm.CollapsedSpec.from_dict(dataclasses.replace(spec, nn_mu_scale=v).to_dict())
+        assert back.nn_mu_scale == v

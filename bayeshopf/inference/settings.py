@@ -33,10 +33,10 @@ class CollapsedSettings:
             infinite width, a Gaussian process with the network's kernel
             (:mod:`bayeshopf.model.network_kernel`), which has no hidden layer
             to draw.
-        nn_mu_scale_learned: At infinite width, sample the network's input
-            scale on μ (``ν``, :data:`~bayeshopf.model.network_kernel.NU_PRIOR`)
-            instead of fixing it at 1: how fast the map may bend in μ, and how
-            fast a prediction's spread grows away from the recordings.
+        nn_mu_scale: At infinite width, the scale ``ν`` of the network's input
+            weight on μ̃ (how fast the map may bend in μ, and how fast a
+            prediction's spread grows away from the recordings); ``None``:
+            sampled (:data:`~bayeshopf.model.network_kernel.NU_PRIOR`).
         nn_seed: Seed of the network's fixed hidden layer (a draw from its
             prior, :func:`~bayeshopf.model.collapsed.hidden_layer`; refit with
             others to see what the draw decides); unused at infinite width.
@@ -89,7 +89,7 @@ class CollapsedSettings:
     n_harmonics: int = 4
     segment_periods: float = 5.0
     nn_width: int | None = 16
-    nn_mu_scale_learned: bool = False
+    nn_mu_scale: float | None = 1.0
     nn_seed: int = 0
     unfolding: str = "curved"
     inference: str = "nuts"
@@ -116,8 +116,13 @@ class CollapsedSettings:
         if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
             raise FitError("nn_width: a positive whole number of hidden units, or None for the "
                            f"network's limit of infinite width, expected; got {w!r}")
-        if self.nn_mu_scale_learned and w is not None:
-            raise FitError("nn_mu_scale_learned: the network's input scale is learned only at "
+        v = self.nn_mu_scale
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
+                              or not math.isfinite(v) or v <= 0):
+            raise FitError("nn_mu_scale: a positive number, or None to sample it, expected; "
+                           f"got {v!r}")
+        if v != 1.0 and w is not None:
+            raise FitError("nn_mu_scale: the network's input scale on μ is set only at "
                            f"infinite width (nn_width=None); got nn_width={w!r}")
         s = self.extrapolation_scale
         if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
@@ -140,7 +145,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | 
                mu_units: str = "", frequency: bool = True,
                control: bool = True, discrepancy: bool = False,
                discrepancy_floor: float = dm.FLOOR, nn_seed: int = 0,
-               nn_mu_scale_learned: bool = False) -> cm.CollapsedSpec:
+               nn_mu_scale: float | None = 1.0) -> cm.CollapsedSpec:
     """Structure and data constants of the collapsed model.
 
     The control term is on when ``control`` is true and the features hold a
@@ -149,8 +154,8 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | 
     the model includes the discrepancy Gaussian process, its coefficient
     scales ``q`` read off the features (:mod:`bayeshopf.model.discrepancy`).
     ``nn_width=None`` gives the network at infinite width, over the features'
-    recordings (:mod:`bayeshopf.model.network_kernel`), with its input scale on
-    μ sampled when ``nn_mu_scale_learned``.
+    recordings (:mod:`bayeshopf.model.network_kernel`), with the input scale
+    ``nn_mu_scale`` on μ (``None``: sampled).
 
     Raises:
         FitError: For fewer than two distinct μ, an unknown criticality or
@@ -192,7 +197,7 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | 
         nn_training=None if nn_width is not None else (
             tuple(float(m) for m in mu),
             tuple(-1.0 if u else 1.0 for u in features.unstable)),
-        nn_mu_scale_learned=bool(nn_mu_scale_learned and nn_width is None),
+        nn_mu_scale=None if nn_mu_scale is None else float(nn_mu_scale),
     )
 
 

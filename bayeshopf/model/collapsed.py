@@ -364,8 +364,9 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
 
     With the discrepancy (``spec.has_discrepancy``) also its scale ``η`` and
     length ``ℓ`` (:mod:`bayeshopf.model.discrepancy`); ``σ_rel`` is then its
-    part independent between recordings. With ``spec.nn_mu_scale_learned`` the
-    network's input scale on ``μ̃``, ``ν`` (:mod:`bayeshopf.model.network_kernel`).
+    part independent between recordings. At infinite width with
+    ``spec.nn_mu_scale`` ``None``, the network's input scale on ``μ̃``, ``ν``
+    (:mod:`bayeshopf.model.network_kernel`).
     """
     h = {"tau_mu": numpyro.sample(
             "tau_mu", dist.LogNormal(np.log(TAU_MU_PRIOR[0]), TAU_MU_PRIOR[1])),
@@ -378,7 +379,7 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
         h["eta"] = numpyro.sample("eta", dist.HalfNormal(dm.ETA_PRIOR))
         h["ell"] = numpyro.sample("ell", dist.LogNormal(np.log(dm.LENGTH_PRIOR[0]),
                                                         dm.LENGTH_PRIOR[1]))
-    if spec.nn_mu_scale_learned:
+    if spec.nn_training is not None and spec.nn_mu_scale is None:
         h["nu_mu"] = numpyro.sample("nu_mu", dist.LogNormal(np.log(nk.NU_PRIOR[0]),
                                                             nk.NU_PRIOR[1]))
     return h

@@ -17,10 +17,11 @@ It has no draw of a hidden layer, so nothing in a fit depends on one.
 
 **Its scale in μ.** ``μ̃`` spans one unit over the recordings, so with unit
 input weights the network varies in μ only on the scale of the whole span.
-With ``spec.nn_mu_scale_learned`` the weight on ``μ̃`` is ``N(0, ν²)``, which is
-the kernel above at ``(ũ1, ũ2, ν μ̃)``; ``ν`` is sampled with the normal form
-(site ``nu_mu``, prior :data:`NU_PRIOR`), so the data choose how fast the map
-may bend in μ and how fast a prediction's spread grows away from the recordings.
+With the weight on ``μ̃`` drawn from ``N(0, ν²)`` the kernel is the one above at
+``(ũ1, ũ2, ν μ̃)``: ``ν = spec.nn_mu_scale`` (1 by default), or, where that is
+``None``, sampled with the normal form (site ``nu_mu``, prior :data:`NU_PRIOR`),
+so that the data choose how fast the map may bend in μ and how fast a
+prediction's spread grows away from the recordings.
 
 **On the orbits.** The data see the network through each recording's harmonic
 coefficients ``f_i = P NN(x_i(φ_n))`` over the ``N`` phases of its orbit
@@ -103,7 +104,7 @@ def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
 def _orbit_coordinates(spec: CollapsedSpec, theta: dict, mu, sign):
     """``(s, ν μ̃)`` of the orbits at ``(mu, sign)``: the network's circles."""
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
-    m = spec.mu_tilde(mu) * (theta["nu_mu"] if spec.nn_mu_scale_learned else 1.0)
+    m = spec.mu_tilde(mu) * (theta["nu_mu"] if spec.nn_mu_scale is None else spec.nn_mu_scale)
     return s, jnp.broadcast_to(m, jnp.shape(s))
 
 

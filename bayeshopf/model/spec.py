@@ -59,9 +59,9 @@ class CollapsedSpec:
             is its infinite-width Gaussian process
             (:mod:`bayeshopf.model.network_kernel`; ``nn_hidden`` is then empty),
             or ``None`` for the network with the fixed hidden layer ``nn_hidden``.
-        nn_mu_scale_learned: Whether the infinite-width network's input weight
-            on ``μ̃`` has a sampled scale ``ν`` (the site ``nu_mu``,
-            :data:`~bayeshopf.model.network_kernel.NU_PRIOR`) instead of 1.
+        nn_mu_scale: ``ν``, the scale of the infinite-width network's input
+            weight on ``μ̃``, or ``None`` where it is sampled (the site
+            ``nu_mu``, :data:`~bayeshopf.model.network_kernel.NU_PRIOR`).
     """
 
     criticality: str
@@ -81,7 +81,7 @@ class CollapsedSpec:
     discrepancy_scale: tuple | None = None
     discrepancy_floor: float = 0.0
     nn_training: tuple | None = None
-    nn_mu_scale_learned: bool = False
+    nn_mu_scale: float | None = 1.0
 
     @property
     def has_discrepancy(self) -> bool:
