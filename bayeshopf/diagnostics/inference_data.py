@@ -6,6 +6,7 @@ import numpy as np
 
 from bayeshopf._version import __version__
 from bayeshopf.diagnostics import arviz_io
+from bayeshopf.features.harmonics import coefficient_names
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import discrepancy as dm
 from bayeshopf.predictive import predictive_draws
@@ -70,8 +71,7 @@ def to_inference_data(post):
             "coeffs": coef, "coeffs_se": coef, "mu": rec, "unstable": rec,
             "amplitude_sd": rec, "n_segments": rec, "segment_rms": rec, "frequency_se": rec}
     coords = {"recording": list(f.names), "frame_axis": ["w1", "w2"],
-              "coefficient": ["a0", *(f"a{k}" for k in range(1, K + 1)),
-                              *(f"b{k}" for k in range(1, K + 1))],
+              "coefficient": coefficient_names(K),
               "basis": basis_names(post.spec, run.betas.shape[1]),
               "frequency_basis": [f"g{j}" for j in range(
                   0 if run.gammas is None else run.gammas.shape[1])]}

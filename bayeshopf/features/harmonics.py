@@ -71,6 +71,12 @@ def n_coefficients(n_harmonics: int) -> int:
     return 2 * n_harmonics + 1
 
 
+def coefficient_names(n_harmonics: int) -> list[str]:
+    """Names ``a0, a1..aK, b1..bK`` of a channel's ``2K + 1`` Fourier coefficients, in order."""
+    k = range(1, n_harmonics + 1)
+    return ["a0", *(f"a{h}" for h in k), *(f"b{h}" for h in k)]
+
+
 def time_design(t, omega: float, n_harmonics: int) -> np.ndarray:
     """Columns ``[1, cos ωt, …, cos Kωt, sin ωt, …, sin Kωt]``, shape ``(n_t, 2K+1)``."""
     kt = np.asarray(t)[:, None] * omega * np.arange(1, n_harmonics + 1)

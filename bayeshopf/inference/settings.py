@@ -22,6 +22,12 @@ from bayeshopf.model import collapsed as cm
 from bayeshopf.model import discrepancy as dm
 
 
+def _positive_or_none(x) -> bool:
+    """Whether ``x`` is ``None`` or a finite number > 0 (not a bool)."""
+    return x is None or (not isinstance(x, bool) and isinstance(x, (int, float))
+                         and math.isfinite(x) and x > 0)
+
+
 @dataclass(frozen=True)
 class CollapsedSettings:
     """Settings of :func:`~bayeshopf.posterior.fit_hybrid` (the defaults are the documented ones).
@@ -117,16 +123,14 @@ class CollapsedSettings:
             raise FitError("nn_width: a positive whole number of hidden units, or None for the "
                            f"network's limit of infinite width, expected; got {w!r}")
         v = self.nn_mu_scale
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
-                              or not math.isfinite(v) or v <= 0):
+        if not _positive_or_none(v):
             raise FitError("nn_mu_scale: a positive number, or None to sample it, expected; "
                            f"got {v!r}")
         if v != 1.0 and w is not None:
             raise FitError("nn_mu_scale: the network's input scale on μ is set only at "
                            f"infinite width (nn_width=None); got nn_width={w!r}")
         s = self.extrapolation_scale
-        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
-                              or not math.isfinite(s) or s <= 0):
+        if not _positive_or_none(s):
             raise FitError("extrapolation_scale: a positive number or None expected (the "
                            "half-normal scale of the model error away from the recordings, "
                            f"in log orbit size; None: {cm.EXTRAPOLATION_SCALE} or "

@@ -104,6 +104,7 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
+from bayeshopf.features.harmonics import coefficient_names
 from bayeshopf.model import discrepancy as dm
 from bayeshopf.model import network_kernel as nk
 from bayeshopf.model.extrapolation import (  # noqa: F401 (re-exported)
@@ -180,9 +181,8 @@ def basis_names(spec: CollapsedSpec) -> list[str]:
     if spec.nn_training is None:
         names += [f"nn{h}" for h in range(spec.n_network)]
     else:
-        coef = ["a0"] + [f"a{k}" for k in range(1, spec.n_harmonics + 1)] + \
-            [f"b{k}" for k in range(1, spec.n_harmonics + 1)]
-        names += [f"nn_{c}_rec{i}" for c in coef for i in range(len(spec.nn_training[0]))]
+        names += [f"nn_{c}_rec{i}" for c in coefficient_names(spec.n_harmonics)
+                  for i in range(len(spec.nn_training[0]))]
     return names + (list(CONTROL_TERMS) if spec.control_scale is not None else [])
 
 

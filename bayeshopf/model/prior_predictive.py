@@ -90,8 +90,9 @@ def draw_data(spec: cm.CollapsedSpec, mu, sign, coeffs_se, key, omega_se=None) -
         raise FitError(f"design: mu {mu.shape}, sign {sign.shape} and coeffs_se {shape} "
                        f"expected; got sign {sign.shape} and coeffs_se {se.shape}")
     if spec.nn_training is not None and not (
-            np.allclose(np.asarray(mu), spec.nn_training[0])
-            and np.allclose(np.asarray(sign), spec.nn_training[1])):
+            mu.shape == np.shape(spec.nn_training[0])
+            and np.allclose(mu, spec.nn_training[0])
+            and np.allclose(sign, spec.nn_training[1])):
         raise FitError("design: the recordings the model's infinite-width network was built on "
                        f"expected (mu {list(spec.nn_training[0])}, sign "
                        f"{list(spec.nn_training[1])}); got mu {np.asarray(mu).tolist()}")

@@ -7,6 +7,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
+from bayeshopf.features.harmonics import coefficient_names
 from bayeshopf.plotting import _style
 from bayeshopf.plotting._units import convert, scale_ppc
 
@@ -18,8 +19,7 @@ def coefficient_labels(n_c: int) -> list[str]:
     """Names ``a0, a1..an, b1..bn`` of the ``n_c = 2n + 1`` Fourier coefficients."""
     if n_c < 1 or n_c % 2 == 0:
         raise ValueError(f"expected an odd number of coefficients (2 n_h + 1); got {n_c}")
-    n_h = (n_c - 1) // 2
-    return ["a0", *(f"a{k}" for k in range(1, n_h + 1)), *(f"b{k}" for k in range(1, n_h + 1))]
+    return coefficient_names((n_c - 1) // 2)
 
 
 def _bars(ivs) -> tuple[np.ndarray, np.ndarray]:
