@@ -78,8 +78,8 @@ def one(name: str) -> dict:
            "chi2_nominal": d["nominal"]["chi2"], "chi2_calibrated": d["calibration"]["chi2"],
            "dof": d["nominal"]["dof"], "top_term": top, "seconds": d["seconds"],
            "time_s": t_an, "simulate_s": t_sim}
-    if effect is not None:
-        t = next(x for x in d["terms"] if x["name"] == effect)
+    t = next((x for x in d["terms"] if x["name"] == effect), None)
+    if t is not None:       # a planted term that equals a calibrated parameter is not a term
         row["effect_fit"] = {**t, "inside": t["ci90"][0] <= value <= t["ci90"][1]}
     return row
 
@@ -101,7 +101,8 @@ def table(rows: list[dict]) -> str:
         ef = r.get("effect_fit")
         eff = (f"{ef['ci90'][0]:.4g} – {ef['ci90'][1]:.4g} ({r['effect_value']:g}, "
                f"{'inside' if ef['inside'] else 'OUTSIDE'}); P = {ef['probability']:.2g}"
-               if ef else "–")
+               if ef else "not a term of the library (a calibrated parameter)"
+               if r["effect"] else "–")
         out.append(
             f"| {r['case']} | {v['kind']} ({v['probability']:.2f}) | {off} | "
             f"{'yes' if not miss else 'no: ' + ', '.join(miss)} | "

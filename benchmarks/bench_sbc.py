@@ -2,6 +2,7 @@
 
     python benchmarks/bench_sbc.py --design paired --seeds 0-199
     python benchmarks/bench_sbc.py --design sweep --seeds 0-199
+    python benchmarks/bench_sbc.py --design paired --seeds 0-199 --pipeline
     python benchmarks/bench_sbc.py --summary        # table and rank histograms
 
 Each simulation draws a data set from the model's prior
@@ -26,7 +27,21 @@ compilation per design): 2 chains of
 ``--warmup`` + ``--samples`` steps from the package's deterministic start, a
 dense mass matrix, target acceptance 0.8, as the package's default.
 
-Writes one JSON line per simulation to ``benchmarks/results/sbc_<design>.jsonl``
+**Through the pipeline** (``--pipeline``): the same draw with the
+measurement noise left out gives each recording's true coefficients; from
+them a time series is written (the design's sampling times, a random time
+origin, the design's frame back to the sensors' units) with white noise of 1%
+of each channel's RMS, and :func:`~bayeshopf.features.harmonics.extract_harmonics`
+(in the design's frame) reads the coefficients, their standard errors, the
+frequencies and theirs from it, as from a recording. The fit then sees what it
+sees from a rig: aligned segment means and estimated errors, which the model
+takes as given. ``--duration D`` keeps the first ``D`` seconds of each record
+(short records: the errors from the noise spectrum). ``--aligned`` (a
+diagnosis) takes the same noise-free coefficients, only moves each
+recording's time origin to its crest as the features do, and adds the
+design's measurement noise to the coefficients: what the alignment alone does.
+
+Writes one JSON line per simulation to ``benchmarks/results/sbc_<design>[_pipeline[_D s]].jsonl``
 (appended, so that a run can be stopped and resumed); ``--summary`` reads them,
 writes ``benchmarks/sbc.json`` (the table ``docs/model_discrepancy.md`` quotes)
 and ``docs/sbc_ranks.png``.
@@ -50,6 +65,8 @@ import numpy as np  # noqa: E402
 L_DRAWS = 99
 #: Histogram bins of the ranks (5 rank values each).
 BINS = 20
+#: Relative RMS of the white measurement noise written into the time series (``--pipeline``).
+NOISE = 0.01
 #: Sites whose ranks are recorded.
 SITES = ("mu0", "mu_fold", "eta", "ell", "gap_hopf", "gap_fold", "w_unfold", "sigma_rel",
          "tau_mu", "tau_shape")
@@ -57,7 +74,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def design(name: str):
-    """``(spec, mu, sign, se, omega_se)`` of a design (module docstring)."""
+    """``(spec, features, recordings)`` of a design (module docstring)."""
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference.settings import build_spec
     from bayeshopf.simulators.truth import flutter_experiment
@@ -70,10 +87,37 @@ def design(name: str):
         keep = ~f.unstable | (f.mu < 16.5)
     else:
         raise SystemExit(f"--design: 'paired' or 'sweep' expected; got {name!r}")
-    f = f.subset(np.flatnonzero(keep))
+    idx = np.flatnonzero(keep)
+    f = f.subset(idx)
     spec = build_spec(f, "subcritical", control=False, discrepancy=True)
-    sign = np.where(f.unstable, -1.0, 1.0)
-    return spec, f.mu, sign, f.coeffs_se, f.omega_se
+    return spec, f, rs.subset(idx)
+
+
+def synthesize(rs, frame, coeffs, omega, rng, noise: float = NOISE,
+               duration: float | None = None):
+    """Recordings whose planar channels hold the orbits ``coeffs`` at ``omega`` (docstring).
+
+    Each recording keeps its μ, branch and sampling times (the first
+    ``duration`` seconds); its time origin is a uniform random phase; the
+    noise is white, ``noise`` times the RMS of each channel about its mean.
+    """
+    from dataclasses import replace
+
+    from bayeshopf.data.recording import Recording
+    from bayeshopf.features.harmonics import time_design
+
+    out = []
+    for r, c, om in zip(rs, coeffs, omega, strict=True):
+        t = r.t if duration is None else r.t[r.t - r.t[0] < duration]
+        t0 = rng.uniform(0.0, 2.0 * np.pi / om)
+        w = time_design(t + t0, float(om), c.shape[-1] // 2) @ c.T      # (n_t, 2)
+        z = frame.from_frame(w)
+        z = z + noise * z.std(axis=0) * rng.standard_normal(z.shape)
+        names = rs.planar
+        out.append(Recording(t=t, channels={names[0]: z[:, 0], names[1]: z[:, 1]},
+                             units={k: r.units[k] for k in names}, mu=r.mu, branch=r.branch,
+                             name=r.name, source="bench_sbc --pipeline"))
+    return replace(rs, recordings=tuple(out), control=None)
 
 
 def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
@@ -129,15 +173,34 @@ def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
     return run
 
 
-def one(seed: int, spec, mu, sign, se, omega_se, run) -> dict:
+def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
+        duration: float | None = None, aligned: bool = False) -> dict:
+    """One simulation: draw, (through the pipeline, or only aligned,) fit, rank."""
     import jax
 
+    from bayeshopf.features.harmonics import align, extract_harmonics
     from bayeshopf.inference.nuts import rhat_ess
     from bayeshopf.model.prior_predictive import draw_data
 
-    d = draw_data(spec, mu, sign, se, jax.random.PRNGKey(seed), omega_se=omega_se)
+    mu, sign = features.mu, np.where(features.unstable, -1.0, 1.0)
+    se, omega_se = features.coeffs_se, features.omega_se
+    key = jax.random.PRNGKey(seed)
+    if pipeline:
+        d = draw_data(spec, mu, sign, np.zeros_like(se), key, omega_se=np.zeros_like(omega_se))
+        rs = synthesize(recordings, features.frame, d.coeffs, d.omega,
+                        np.random.default_rng(seed), duration=duration)
+        f = extract_harmonics(rs, n_harmonics=spec.n_harmonics, frame=features.frame)
+        data = (f.coeffs, f.coeffs_se, f.omega, f.omega_se)
+    elif aligned:
+        d = draw_data(spec, mu, sign, np.zeros_like(se), key, omega_se=np.zeros_like(omega_se))
+        rng = np.random.default_rng(seed)
+        data = (align(d.coeffs) + se * rng.standard_normal(se.shape), se,
+                d.omega + omega_se * rng.standard_normal(omega_se.shape), omega_se)
+    else:
+        d = draw_data(spec, mu, sign, se, key, omega_se=omega_se)
+        data = (d.coeffs, se, d.omega, omega_se)
     t0 = time.perf_counter()
-    chains, div = run(jax.random.PRNGKey(10**6 + seed), mu, sign, d.coeffs, se, d.omega, omega_se)
+    chains, div = run(jax.random.PRNGKey(10**6 + seed), mu, sign, *data)
     wall = time.perf_counter() - t0
     pooled = {k: np.asarray(v).reshape(-1) for k, v in chains.items() if k in SITES}
     n = next(iter(pooled.values())).size
@@ -150,18 +213,29 @@ def one(seed: int, spec, mu, sign, se, omega_se, run) -> dict:
             "divergences": div, "rhat_max": rhat, "ess_min": ess, "wall_s": wall}
 
 
+def results_path(name: str, pipeline: bool, duration: float | None, aligned: bool = False
+                 ) -> Path:
+    """``benchmarks/results/sbc_<design>[_pipeline[_<D>s] | _aligned].jsonl``."""
+    tag = "" if not pipeline else "_pipeline" + ("" if duration is None else f"_{duration:g}s")
+    tag = "_aligned" if aligned else tag
+    return RESULTS_DIR / f"sbc_{name}{tag}.jsonl"
+
+
 def parse_seeds(s: str) -> list[int]:
     a, _, b = s.partition("-")
     return list(range(int(a), int(b or a) + 1))
 
 
-def run_design(name: str, seeds: list[int], warmup: int, samples: int) -> None:
+def run_design(name: str, seeds: list[int], warmup: int, samples: int,
+               pipeline: bool = False, duration: float | None = None,
+               aligned: bool = False) -> None:
     from bayeshopf._x64 import ensure_x64
 
     ensure_x64()
-    spec, mu, sign, se, omega_se = design(name)
-    run = make_runner(spec, mu, sign, se, omega_se, warmup, samples)
-    out = RESULTS_DIR / f"sbc_{name}.jsonl"
+    spec, f, rs = design(name)
+    sign = np.where(f.unstable, -1.0, 1.0)
+    run = make_runner(spec, f.mu, sign, f.coeffs_se, f.omega_se, warmup, samples)
+    out = results_path(name, pipeline, duration, aligned)
     out.parent.mkdir(parents=True, exist_ok=True)
     done = set()
     if out.exists():
@@ -169,11 +243,12 @@ def run_design(name: str, seeds: list[int], warmup: int, samples: int) -> None:
     for seed in seeds:
         if seed in done:
             continue
-        rec = one(seed, spec, mu, sign, se, omega_se, run)
-        rec.update(design=name, warmup=warmup, samples=samples)
+        rec = one(seed, spec, f, rs, run, pipeline, duration, aligned)
+        rec.update(design=name, warmup=warmup, samples=samples, pipeline=pipeline,
+                   duration=duration, aligned=aligned)
         with out.open("a") as fh:
             fh.write(json.dumps(rec) + "\n")
-        print(f"sbc {name}: seed {seed}: ranks mu0 {rec['ranks']['mu0']} fold "
+        print(f"sbc {out.stem}: seed {seed}: ranks mu0 {rec['ranks']['mu0']} fold "
               f"{rec['ranks']['mu_fold']} eta {rec['ranks']['eta']}; R̂ {rec['rhat_max']:.3f}, "
               f"{rec['divergences']} divergent, {rec['wall_s']:.1f} s", file=sys.stderr, flush=True)
 
@@ -187,13 +262,16 @@ def summary(seeds: list[int]) -> None:
 
     table = {}
     shown = ("mu0", "mu_fold", "eta")
-    fig, axes = plt.subplots(2, len(shown), figsize=(10, 5.5), sharey=True)
-    for r, name in enumerate(("paired", "sweep")):
-        path = RESULTS_DIR / f"sbc_{name}.jsonl"
-        recs = [json.loads(x) for x in path.read_text().splitlines() if x] if path.exists() else []
-        recs = [x for x in recs if x["seed"] in set(seeds)]
-        if not recs:
-            continue
+    runs = []
+    for name in ("paired", "sweep"):
+        for path in sorted(RESULTS_DIR.glob(f"sbc_{name}*.jsonl")):
+            recs = [json.loads(x) for x in path.read_text().splitlines() if x]
+            recs = [x for x in recs if x["seed"] in set(seeds)]
+            if recs:
+                runs.append((path.stem.removeprefix("sbc_"), recs))
+    fig, axes = plt.subplots(len(runs), len(shown), figsize=(10, 2.75 * len(runs)),
+                             sharey=True, squeeze=False)
+    for r, (name, recs) in enumerate(runs):
         seen = [x["seed"] for x in recs]
         row = {"n": len(recs), "seeds": [min(seen), max(seen)],
                "rhat_above_1.01": sum(x["rhat_max"] > 1.01 for x in recs),
@@ -220,7 +298,7 @@ def summary(seeds: list[int]) -> None:
             ax.set_title(f"{name}: {label}  (χ² p = {s['chi2_p']:.2f})", fontsize=9)
             ax.set_xticks([0, BINS // 2, BINS])
             ax.set_xticklabels(["0", "0.5", "1"])
-            if r == 1:
+            if r == len(runs) - 1:
                 ax.set_xlabel("rank of the truth among the draws")
         axes[r, 0].set_ylabel(f"simulations (of {row['n']})")
     fig.suptitle("Simulation-based calibration: ranks of the truth among 99 posterior draws "
@@ -240,14 +318,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--design", choices=("paired", "sweep"))
     ap.add_argument("--seeds", default="0-199")
-    ap.add_argument("--warmup", type=int, default=400)
-    ap.add_argument("--samples", type=int, default=400)
+    ap.add_argument("--warmup", type=int, default=300)
+    ap.add_argument("--samples", type=int, default=300)
+    ap.add_argument("--pipeline", action="store_true",
+                    help="through time series and the feature extraction")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="with --pipeline: keep the first D seconds of each record")
+    ap.add_argument("--aligned", action="store_true",
+                    help="coefficients only moved to the crest's time origin (no time series)")
     ap.add_argument("--summary", action="store_true")
     a = ap.parse_args()
     if a.summary:
         summary(parse_seeds(a.seeds))
     elif a.design:
-        run_design(a.design, parse_seeds(a.seeds), a.warmup, a.samples)
+        if a.duration is not None and not a.pipeline:
+            ap.error("--duration needs --pipeline")
+        if a.aligned and a.pipeline:
+            ap.error("--aligned and --pipeline are two different runs; give one")
+        run_design(a.design, parse_seeds(a.seeds), a.warmup, a.samples, a.pipeline, a.duration,
+                   a.aligned)
     else:
         ap.error("--design or --summary expected")
 

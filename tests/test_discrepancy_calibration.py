@@ -308,7 +308,7 @@ def test_parameters_are_named_off_at_a_family_wise_level():
 
 
 def test_a_parameter_is_off_only_beyond_its_declared_tolerance():
-    """Most of the posterior must lie outside nominal·(1 ± tolerance), not only away from nominal."""
+    """Most of the posterior must lie outside nominal·(1 ± tolerance), not only off nominal."""
     from bayeshopf.discrepancy.records import posteriors
     from bayeshopf.simulators.base import SimulationError, UncertainParameter
 

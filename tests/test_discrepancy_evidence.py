@@ -89,6 +89,35 @@ def test_a_step_that_loses_the_orbit_is_charged_at_most_the_linear_credit():
     assert prob.solved[-1] == pytest.approx(delta, rel=1e-12)   # the step was re-shot
 
 
+def test_the_model_error_is_inferred_from_what_the_model_achieves_not_what_it_promises():
+    # the residuals cannot move (e(x) = A0 at every x) but the linearisation claims they
+    # can (de = J0): at each model error τ the charged evidence is the Laplace evidence about
+    # x as it stands, so τ's posterior is that of the misfit at x, not of the promise
+    from bayeshopf.discrepancy.evidence import TAU, _model_error, laplace_evidence
+    from bayeshopf.discrepancy.fitting import _charged
+
+    prob = _HandProblem(lambda x: A0, lambda x: J0)
+    ref = np.full((prob.R, prob.P), 30.0)
+    prob.fitter.sigma_at = lambda tau: np.sqrt(1.0 + (tau * ref) ** 2)
+
+    def evidence(x, E, G, ok, penalty):
+        return _model_error(prob.fitter, E, G, ok, lambda Et, Gt: laplace_evidence(Et, Gt)[0],
+                            penalty)[0]
+
+    ob, E = prob.solve(np.zeros(1))
+    G = prob.jacobian(np.zeros(1))
+    promised = evidence(np.zeros(1), E, G, ob.ok, None)
+    _, _, _, _, charged, pen = _charged(prob, np.zeros(1), ob, E, G, evidence, refined=False)
+    as_it_stands = _model_error(
+        prob.fitter, E, G, ob.ok,
+        lambda Et, Gt: -0.5 * float(Et @ Et) - 0.5 * np.linalg.slogdet(Gt.T @ Gt)[1])[0]
+    assert charged.median == pytest.approx(as_it_stands.median, rel=1e-9)
+    assert charged.log_z == pytest.approx(as_it_stands.log_z, rel=1e-9)
+    assert promised.median < 0.5 * charged.median          # the promise asked for less error
+    assert pen == pytest.approx(promised.log_z - charged.log_z, rel=1e-12) and pen > 0
+    assert TAU[0] < charged.median < TAU[-1]
+
+
 def test_a_linear_residual_is_charged_nothing():
     prob = _HandProblem(lambda x: A0 + J0 * x, lambda x: J0)
     ob, E = prob.solve(np.zeros(1))

@@ -56,6 +56,16 @@ def test_recovers_planted_coefficients_with_honest_standard_errors():
     assert 0.7 < ratio < 1.6
 
 
+def test_frequency_standard_error_matches_its_spread_over_noise_realisations():
+    """The frequency is fitted on the whole record: its error falls as T^(-3/2), so the
+    segments' spread (each of T/n) overstates it unless scaled by n^(3/2), not √n."""
+    f = extract_harmonics(_set(20.0, 500.0, 0.05, seed=3, n=60), n_harmonics=2, frame=IDENTITY)
+    assert f.n_segments.min() >= 9
+    spread = np.std(f.omega, ddof=1)          # 60 realisations of the same orbit
+    ratio = np.median(f.omega_se) / spread
+    assert 0.75 < ratio < 1.35, (np.median(f.omega_se), spread)
+
+
 def test_control_fundamental_is_on_the_features_time_origin():
     """A control channel u(t) = A cos(ω(t + t0) + ψ), with z1's crest at t = −t0: after the
     alignment its fundamental is A(cos ψ, −sin ψ); without a control channel it is None."""

@@ -177,13 +177,17 @@ def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, tau:
 
 
 def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
-                 evidence) -> tuple[ModelError, np.ndarray]:
+                 evidence, penalty=None) -> tuple[ModelError, np.ndarray]:
     """τ integrated out: ``evidence(E_τ, G_τ)`` at every point of :data:`TAU`.
+
+    ``penalty(τ, E_τ, G_τ)``, when given, is subtracted at each τ (a
+    linearisation's charge, which depends on the whitening, so that the
+    posterior of τ is that of the charged evidence).
 
     Returns the :class:`ModelError` and the log evidence at each τ.
     """
-    lz = np.array([evidence(Et, Gt) + ln
-                   for Et, Gt, ln in (_rewhiten(fitter, E, G, ok, t) for t in TAU)])
+    lz = np.array([evidence(Et, Gt) + ln - (penalty(t, Et, Gt) if penalty else 0.0)
+                   for t, (Et, Gt, ln) in ((t, _rewhiten(fitter, E, G, ok, t)) for t in TAU)])
     mx = lz.max()
     w = np.exp(lz - mx)
     w /= w.sum()

@@ -5,8 +5,8 @@ stacked residuals (:mod:`~bayeshopf.discrepancy.problem`) from nominal, its
 Laplace evidence with τ integrated out (:mod:`~bayeshopf.discrepancy.evidence`).
 
 **One term** (:math:`M_k`). *Screened* (:func:`screen_term`): the
-calibration's Jacobian plus the term's own column (one re-shot orbit set, a
-forward difference in ζ at ζ = 0) make a linear model in :math:`(z, \zeta)`
+calibration's Jacobian plus the term's own column (its exact derivative in ζ
+at ζ = 0, from the calibration's orbits) make a linear model in :math:`(z, \zeta)`
 whose evidence is that of :func:`~bayeshopf.discrepancy.evidence.term_marginal`
 at the calibration. *Fitted in full* (:func:`fit_term`): the joint mode, from
 the calibration or from the nominal parameters (a calibration that cannot
@@ -16,7 +16,7 @@ converges faster from nominal than from that compromise).
 
 **Pairs.** Screened with both columns at the calibration (:func:`screen_pair`,
 no orbit shot), or stepwise, a second term added to a refined single term at
-its mode (:func:`screen_second`, one orbit set per term), which finds a
+its mode (:func:`screen_second`, no orbit re-shot), which finds a
 second term whose signature only shows once the first is in; fitted in full
 by :func:`refit_pair`. The coefficients' correlation says whether the data
 see both terms or only their combination.
@@ -70,7 +70,14 @@ from bayeshopf.discrepancy.evidence import (
 )
 from bayeshopf.discrepancy.nested import CoefficientPosterior, gaussian_marginal
 from bayeshopf.discrepancy.orbits import OrbitBatch
-from bayeshopf.discrepancy.problem import MAX_NFEV, Problem, charge, minimise, polish
+from bayeshopf.discrepancy.problem import (
+    MAX_NFEV,
+    Problem,
+    charge,
+    charge_at_every_tau,
+    minimise,
+    polish,
+)
 from bayeshopf.discrepancy.records import (
     CalibratedPairFit,
     CalibratedTermFit,
@@ -136,12 +143,11 @@ def fit_parameters(fitter: Fitter, unc: Sequence[UncertainParameter], *,
     prob = Problem(fitter, unc, None, seeds, known=known)
     x, ob, E, G, res = minimise(prob, x0, max_nfev)
     jac0 = known[0][1] if known else prob.first[1][: R * P]   # at z = 0, the first one
-    def evidence():
-        return _model_error(fitter, E, G, ob.ok, lambda Et, Gt: laplace_evidence(Et, Gt)[0])[0]
+    def evidence(x, E, G, ok, penalty):
+        return _model_error(fitter, E, G, ok, lambda Et, Gt: laplace_evidence(Et, Gt)[0],
+                            penalty)[0]
 
-    x, ob, E, G, penalty = polish(prob, x, ob, E, G, evidence().median)
-    me = evidence()
-    me = replace(me, log_z=me.log_z - penalty)
+    x, ob, E, G, me, _ = _charged(prob, x, ob, E, G, evidence, refined=True)
     _, delta, cov = laplace_evidence(*_at_tau(fitter, E, G, ob.ok, me.median))
     z = x + delta
     e = E[: R * P].reshape(R, P)
@@ -160,31 +166,32 @@ def _term_problem(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term,
     """The residuals over ``(z, ζ)``, seeded with the calibration (its orbits and Jacobian)."""
     d = len(unc)
     x0 = np.concatenate([cal.z_mode, [0.0]])
-    sd = np.sqrt(np.clip(np.diag(cal.cov), 0.0, None))
     prob = Problem(fitter, unc, term, [(np.zeros(d + 1), fitter.base), (x0, cal.orbits)],
-                    known=[(cal.z_mode, cal.jac), (np.zeros(d), cal.jac_nominal)],
-                    h0=np.concatenate([np.clip(0.1 * sd, 1e-5, 1e-2), [1e-3]]))
+                    known=[(cal.z_mode, cal.jac), (np.zeros(d), cal.jac_nominal)])
     return prob, x0
 
 
 def _charged(prob, x, ob, E, G, evidence, refined: bool):
-    """The evidence at ``x`` with its linearisation charge paid.
+    """The evidence at ``x`` with its linearisation charge paid at every τ.
 
-    A refined fit is polished (:func:`~bayeshopf.discrepancy.problem.polish`:
-    the linear step once, where the re-shot orbits confirm it); a screened one
-    pays :func:`~bayeshopf.discrepancy.problem.charge` at ``x``. ``evidence``
-    maps a point to its :class:`~bayeshopf.discrepancy.records.ModelError`.
+    A refined fit is polished first (:func:`~bayeshopf.discrepancy.problem.polish`:
+    the linear step once, where the re-shot orbits confirm it). Then the orbits
+    are re-shot at the linear model's mode (:func:`~bayeshopf.discrepancy.problem.charge`)
+    and the evidence is integrated over τ with the charge at each τ
+    (:func:`~bayeshopf.discrepancy.problem.charge_at_every_tau`). ``evidence``
+    maps ``(x, E, G, ok, penalty)`` to a :class:`~bayeshopf.discrepancy.records.ModelError`.
 
     Returns:
-        ``(x, ob, E, G, model_error, penalty)`` at the point kept.
+        ``(x, ob, E, G, model_error, penalty)`` at the point kept; ``penalty``
+        is the fall of the log evidence that the charge makes.
     """
-    me = evidence(x)
+    me = evidence(x, E, G, ob.ok, None)
     if refined:
-        x, ob, E, G, penalty = polish(prob, x, ob, E, G, me.median)
-        me = evidence(x)
-    else:
-        penalty = charge(prob, x, ob, E, G, me.median).nats
-    return x, ob, E, G, replace(me, log_z=me.log_z - penalty), penalty
+        x, ob, E, G, _ = polish(prob, x, ob, E, G, me.median)
+        me = evidence(x, E, G, ob.ok, None)
+    c = charge(prob, x, ob, E, G, me.median)
+    charged = evidence(x, E, G, ob.ok, charge_at_every_tau(prob, x, c))
+    return x, ob, E, G, charged, me.log_z - charged.log_z
 
 
 def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray, *,
@@ -199,10 +206,10 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
     term, unc, fitter = prob.term, prob.unc, prob.fitter
     d = prob.d
 
-    def evidence(x):
-        return _model_error(fitter, E, G, ob.ok,
+    def evidence(x, E, G, ok, penalty):
+        return _model_error(fitter, E, G, ok,
                             lambda Et, Gt: _zeta_gaussian(Et, Gt, float(x[d]),
-                                                          term.positive)[0])[0]
+                                                          term.positive)[0], penalty)[0]
 
     x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     zeta = float(x[d])
@@ -243,9 +250,9 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
 
 def screen_term(fitter: Fitter, unc: Sequence[UncertainParameter], term: Term,
                 cal: Calibration) -> CalibratedTermFit:
-    r"""The term linearised at the calibration's mode: one re-shot orbit set per term.
+    r"""The term linearised at the calibration's mode: no orbit re-shot.
 
-    The calibration's Jacobian plus the term's column (a forward difference
+    The calibration's Jacobian plus the term's column (its exact derivative
     in ζ at ζ = 0) make a linear model in :math:`(z, \zeta)` whose evidence
     (:func:`~bayeshopf.discrepancy.evidence.term_marginal`) ranks the terms;
     :func:`~bayeshopf.discrepancy.calibration.calibrate` refits the best
@@ -299,9 +306,9 @@ def _pair_fit(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Te
     d = len(unc)
     pos = [d + k for k, t in enumerate(terms) if t.positive]
 
-    def evidence(x):
-        return _model_error(fitter, E, G, ob.ok,
-                            lambda Et, Gt: _gauss_evidence(Et, Gt, x, pos))[0]
+    def evidence(x, E, G, ok, penalty):
+        return _model_error(fitter, E, G, ok,
+                            lambda Et, Gt: _gauss_evidence(Et, Gt, x, pos), penalty)[0]
 
     x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     Et, Gt = _at_tau(fitter, E, G, ob.ok, me.median)
@@ -364,10 +371,10 @@ def screen_second(unc: Sequence[UncertainParameter], first: CalibratedTermFit, t
                   ) -> CalibratedPairFit:
     """A second term added to a refined single-term fit, linearised at that fit's mode.
 
-    The first fit's Jacobian is reused; only the new term's column is shot (one
-    orbit set), so every term can be tried as the second one of a pair: the
-    forward step of a stepwise search, which finds a second term whose
-    signature only shows in the residual of the first.
+    The first fit's Jacobian is reused; only the new term's column is computed
+    (exactly, at the first fit's orbits), so every term can be tried as the
+    second one of a pair: the forward step of a stepwise search, which finds a
+    second term whose signature only shows in the residual of the first.
     """
     if first.jac is None or first.fitter is None:
         raise CalibrationError(f"screen_second expects a fit from fit_term; got "
@@ -377,8 +384,7 @@ def screen_second(unc: Sequence[UncertainParameter], first: CalibratedTermFit, t
     x0 = np.concatenate([first.x, [0.0]])
     prob = Problem(fitter, unc, (first.term, term),
                     [(np.zeros(d + 2), fitter.base), (x0, first.orbits)],
-                    known=[(first.x, first.jac)],
-                    h0=np.concatenate([np.full(d + 1, 1e-3), [1e-3]]))
+                    known=[(first.x, first.jac)])
     ob, E = prob.solve(x0)
     return _pair_fit(fitter, unc, (first.term, term), prob.nominal, x0, ob, E,
                      prob.jacobian(x0), refined=False, prob=prob)

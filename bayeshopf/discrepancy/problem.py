@@ -19,10 +19,10 @@ stacked vector
 
 the prior rows :math:`x` being the standard normal priors. The mode is found by
 :func:`scipy.optimize.least_squares` (trust-region Gauss–Newton, a bound
-:math:`\zeta \ge 0` for a gap), with the Jacobian :math:`G = \partial E/\partial x`
-by forward differences of re-shot orbits (steps a tenth of the current
-posterior standard deviation, as in :mod:`~bayeshopf.discrepancy.select`);
-rows of orbits lost at either end of a difference are zero.
+:math:`\zeta \ge 0` for a gap), with the exact Jacobian :math:`G = \partial E/\partial x`
+from the implicit derivatives of the orbits found at :math:`x`
+(:func:`~bayeshopf.discrepancy.orbits.sensitivities`); rows of lost orbits are
+zero.
 
 **Recorded orbits must exist.** An orbit that the simulator has at the start
 of a fit (the nominal parameters) but loses at a trial point (its fold moved
@@ -54,7 +54,8 @@ from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.discrepancy.terms import Term
 from bayeshopf.simulators.base import UncertainParameter
 
-__all__ = ["BARRIER", "MAX_NFEV", "TOL", "Charge", "Problem", "charge", "minimise", "polish"]
+__all__ = ["BARRIER", "MAX_NFEV", "TOL", "Charge", "Problem", "charge", "charge_at_every_tau",
+           "minimise", "polish"]
 
 #: Largest number of residual evaluations of one least-squares fit.
 MAX_NFEV = 40
@@ -66,7 +67,7 @@ BARRIER = 1e5
 
 
 class Problem:
-    """Stacked whitened residuals :math:`E(x)` and their forward-difference Jacobian.
+    """Stacked whitened residuals :math:`E(x)` and their exact Jacobian.
 
     Orbits are memoised by ``x``; a new ``x`` is reached by homotopy
     (:func:`~bayeshopf.discrepancy.orbits.track`) from the solved point with the
@@ -76,8 +77,7 @@ class Problem:
     def __init__(self, fitter: Fitter, unc: Sequence[UncertainParameter],
                  term: Term | Sequence[Term] | None,
                  seeds: Sequence[tuple[np.ndarray, OrbitBatch]], *,
-                 known: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                 h0: np.ndarray | None = None):
+                 known: Sequence[tuple[np.ndarray, np.ndarray]] = ()):
         self.terms = (() if term is None else (term,) if isinstance(term, Term)
                       else tuple(term))
         self.fitter, self.unc = fitter, tuple(unc)
@@ -90,7 +90,6 @@ class Problem:
         self.must = np.logical_or.reduce([ob.ok for _, ob in seeds])
         for x, ob in seeds:
             self._store(np.asarray(x, float), ob)
-        self.h = np.full(self.n, 1e-3) if h0 is None else np.asarray(h0, float).copy()
         self.n_track = 0
         # data rows of Jacobian columns already known at some points (the calibration's)
         self.known = list(known)
@@ -138,11 +137,23 @@ class Problem:
         """:math:`E(x)`, for :func:`scipy.optimize.least_squares`."""
         return self.solve(x)[1]
 
-    def jacobian(self, x: np.ndarray, *_) -> np.ndarray:
-        r""":math:`G = \partial E/\partial x` by forward differences (prior rows exact).
+    def _column_params(self, j: int) -> str:
+        return self.unc[j].name if j < self.d else self.terms[j - self.d].param
 
-        Columns known at ``x`` (``known``) are reused; the steps become a tenth of
-        the posterior standard deviations that ``G`` gives.
+    def _slope(self, j: int, x: np.ndarray) -> float:
+        """``∂p_j/∂x_j``: the prior map's slope (a term's scale for a term's coefficient)."""
+        if j >= self.d:
+            return float(self.terms[j - self.d].scale)
+        u, eps = self.unc[j], 1e-6
+        return float((u.value(x[j] + eps, self.nominal[j])
+                      - u.value(x[j] - eps, self.nominal[j])) / (2 * eps))
+
+    def jacobian(self, x: np.ndarray, *_) -> np.ndarray:
+        r""":math:`G = \partial E/\partial x`, exactly (prior rows the identity).
+
+        The orbits' derivatives in every unknown come from one implicit solve at
+        the orbits found (:func:`~bayeshopf.discrepancy.orbits.sensitivities`);
+        a lost orbit's rows are 0. Columns known at ``x`` (``known``) are reused.
         """
         x = np.asarray(x, float)
         if self.last is not None and np.array_equal(self.last[0], x):
@@ -152,22 +163,15 @@ class Problem:
         G = np.zeros((E.size, self.n))
         kn = next((J for xk, J in self.known if np.array_equal(xk[: J.shape[1]], x[: J.shape[1]])
                    and not np.any(x[J.shape[1]:])), None)
-        for j in range(self.n):
-            if kn is not None and j < kn.shape[1]:
-                G[: R * P, j] = kn[:, j]
-                continue
-            h = self.h[j]
-            xj = x.copy()
-            xj[j] += h
-            ob_j = self._track(x, ob, xj)
-            col = (self._E(xj, ob_j) - E) / h
-            bad = ~(ob.ok & ob_j.ok)
-            col[: R * P].reshape(R, P)[bad] = 0.0
-            G[:, j] = col
+        n_known = 0 if kn is None else min(kn.shape[1], self.n)
+        if n_known:
+            G[: R * P, :n_known] = kn[:, :n_known]
+        need = list(range(n_known, self.n))
+        if need:
+            D = self.fitter.derivatives(ob, self.params(x), [self._column_params(j) for j in need])
+            for c, j in enumerate(need):
+                G[: R * P, j] = self._slope(j, x) * D[..., c].ravel()
         G[R * P:] = np.eye(self.n)                             # the prior rows, exactly
-        H = G.T @ G
-        sd = np.sqrt(np.clip(np.diag(np.linalg.inv(H)), 0.0, None))
-        self.h = np.clip(0.1 * sd, 1e-5, 1e-2)
         self.last = (x.copy(), G.copy())
         if self.first is None:
             self.first = self.last
@@ -268,6 +272,34 @@ def charge(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.nd
     shot = float(El_t @ El_t)
     here = float(Et @ Et)
     return Charge(0.5 * max(0.0, min(shot, here) - pred), xl, ob_l, E_l, shot, here, pred)
+
+
+def charge_at_every_tau(prob: Problem, x: np.ndarray, c: Charge):
+    r"""The charge of :func:`charge` as a function of the model error τ.
+
+    ``c`` holds the orbits re-shot once, at the linear model's mode for one τ.
+    At every τ the linear model's promise :math:`\chi^2_{\rm lin}(\tau)` (its
+    own mode at that whitening) is replaced by the lower of the misfits
+    computed on the model, at ``x`` and at the re-shot point, both whitened at
+    τ. Integrated over τ (:func:`~bayeshopf.discrepancy.evidence._model_error`'s
+    ``penalty``), the model error is inferred from what the model achieves, not
+    from what its linearisation promises: a promise of a near-perfect fit
+    would otherwise pull τ down to where the point ``x`` itself fits badly.
+
+    Returns:
+        ``penalty(τ, E_τ, G_τ)`` in nats.
+    """
+    fitter, lower = prob.fitter, _lower(prob)
+    none = np.zeros((c.E.size, 0))
+
+    def penalty(tau: float, Et: np.ndarray, Gt: np.ndarray) -> float:
+        _, delta, _ = laplace_evidence(Et, Gt)
+        xl = np.maximum(x + delta, lower)
+        pred = float(np.sum((Et + Gt @ (xl - x)) ** 2))
+        El = _at_tau(fitter, c.E, none, c.orbits.ok, tau)[0]
+        return 0.5 * max(0.0, min(float(El @ El), float(Et @ Et)) - pred)
+
+    return penalty
 
 
 def polish(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np.ndarray,

@@ -37,11 +37,12 @@ An orbit that the simulator with the term does not have at a recording's μ
 :meth:`~bayeshopf.discrepancy.terms.Term.log_prior`) with the library's prior
 scale. The mode is
 found by Gauss–Newton on the whitened residuals with the orbits re-shot at
-every iterate (homotopy from the previous one) and forward-difference
-sensitivities; then the features are linearised at the mode and the 1-D
-posterior is evaluated on a grid of :math:`\pm 6` posterior standard
-deviations, which gives the median, the 90% interval and the marginal
-likelihood :math:`Z_k = \int p(y\mid c)\,p(c)\,dc` (trapezoid rule).
+every iterate (homotopy from the previous one) and the exact sensitivities
+of the orbits (:func:`~bayeshopf.discrepancy.orbits.sensitivities`); then the
+features are linearised at the mode and the 1-D posterior is evaluated on a
+grid of :math:`\pm 6` posterior standard deviations, which gives the median,
+the 90% interval and the marginal likelihood
+:math:`Z_k = \int p(y\mid c)\,p(c)\,dc` (trapezoid rule).
 
 **Selection.** A discrete spike-and-slab over single terms: prior
 probability 1/2 that nothing is missing (:math:`c = 0`, :math:`Z_0 = p(y\mid 0)`)
@@ -52,12 +53,13 @@ time is what the evidence can resolve from a handful of recordings.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from bayeshopf.discrepancy.features import MeasuredFeatures, simulated
-from bayeshopf.discrepancy.orbits import OrbitBatch, track
+from bayeshopf.discrepancy.orbits import OrbitBatch, sensitivities, track
 from bayeshopf.discrepancy.terms import Library, Term, library_params
 from bayeshopf.simulators.base import System
 
@@ -188,6 +190,37 @@ class Fitter:
         e[~ok] = np.sqrt(LOST_CHI2)
         return e
 
+    def derivatives(self, ob: OrbitBatch, params: dict, names: Sequence[str]) -> np.ndarray:
+        """Exact derivatives ``(R, P, m)`` of the whitened residuals in ``params[names]``.
+
+        The orbits' derivatives come from one implicit solve at ``ob``
+        (:func:`~bayeshopf.discrepancy.orbits.sensitivities`); the features are
+        smooth functions of an orbit's samples and period (Fourier coefficients
+        with a fixed phase, the frequency), differentiated along each exact
+        direction by a central difference of 10⁻⁶ of the orbits' size, which
+        re-solves no orbit. A lost orbit's rows are 0.
+        """
+        R, P = self.mf.y.shape
+        out = np.zeros((R, P, len(names)))
+        ok = ob.ok
+        if not ok.any():
+            return out
+        dS, dT = sensitivities(self.system, params, ob, names)
+        size = float(np.max(np.abs(ob.states[ok])))
+        for c in range(len(names)):
+            rel = max(float(np.max(np.abs(dS[ok, ..., c]))) / size,
+                      float(np.max(np.abs(dT[ok, c] / ob.period[ok]))))
+            if rel == 0.0:
+                continue
+            h = 1e-6 / rel
+            plus = replace(ob, states=ob.states + h * dS[..., c],
+                           period=ob.period + h * dT[:, c])
+            minus = replace(ob, states=ob.states - h * dS[..., c],
+                            period=ob.period - h * dT[:, c])
+            out[..., c] = (self.residuals(plus) - self.residuals(minus)) / (2 * h)
+        out[~ok] = 0.0
+        return out
+
     def offsets(self, ob: OrbitBatch) -> dict[str, float]:
         """The sensor offsets that the residuals profile out, per channel."""
         ysim = self.features(ob)
@@ -212,16 +245,12 @@ class Fitter:
         c, ob = 0.0, self.base
         e = self.residuals(ob)
         logpost = -0.5 * np.sum(e**2)
-        h = 1e-3 * s
 
-        def sensitivity(c, ob, e, h):
-            c_fd = c + abs(h) if term.positive else c + h
-            ob_fd = self.orbits(term, c_fd, ob, c)
-            g = (self.residuals(ob_fd) - e) / (c_fd - c)
-            g[~(ob.ok & ob_fd.ok)] = 0.0
+        def sensitivity(c, ob):
+            g = self.derivatives(ob, {**self.params0, term.param: c}, [term.param])[..., 0]
             return g, float(np.sum(g**2) + 1.0 / s**2)
 
-        g, prec = sensitivity(c, ob, e, h)
+        g, prec = sensitivity(c, ob)
         for _ in range(GN_ITER):
             d = -(np.sum(g * e) + c / s**2) / prec
             for _ in range(6):  # step halving until the log posterior does not decrease
@@ -236,7 +265,7 @@ class Fitter:
                 break
             step = abs(c_new - c)
             c, ob, e, logpost = c_new, ob_new, e_new, lp_new
-            g, prec = sensitivity(c, ob, e, 0.1 / np.sqrt(prec))
+            g, prec = sensitivity(c, ob)
             if step < 1e-2 / np.sqrt(prec):
                 break
         sd = 1.0 / np.sqrt(prec)

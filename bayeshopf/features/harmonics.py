@@ -283,7 +283,9 @@ class HarmonicFeatures:
             (frame units), ``(n_rec,)``; 0 for a single segment.
         n_segments: Segments per recording.
         omega: Angular frequency (rad/s) per recording.
-        omega_se: Its standard error (from the segments, or 0 for one segment).
+        omega_se: Its standard error: the spread of the ``n`` segments' own
+            frequencies over ``n^{3/2}`` (ω is fitted on the whole record, whose
+            error falls as its length to the power −3/2), or 0 for one segment.
         amplitude: Peak-to-peak of z1 of the mean orbit (z1's unit).
         amplitude_sd: Spread of the segments' amplitudes.
         frame: The common planar frame.
@@ -434,7 +436,9 @@ def extract_harmonics(
         out["rms"].append(float(np.sqrt(np.mean(np.sum(dev**2, axis=-1)))) if n_seg > 1 else 0.0)
         out["nseg"].append(n_seg)
         out["om"].append(omega)
-        out["om_se"].append(float(np.std(seg_om, ddof=1) / np.sqrt(n_seg)) if n_seg > 1 else 0.0)
+        # the record's frequency is fitted on all n segments together: its error is the
+        # segments' spread over n^(3/2) (a frequency's variance falls as T^-3), not over √n
+        out["om_se"].append(float(np.std(seg_om, ddof=1) / n_seg**1.5) if n_seg > 1 else 0.0)
         out["amp"].append(float(_amplitude(mean, frame)))
         out["amp_sd"].append(float(_amplitude(seg, frame).std(ddof=1)) if n_seg > 1 else 0.0)
     if short:

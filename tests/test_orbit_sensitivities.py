@@ -1,0 +1,69 @@
+"""Exact derivatives of periodic orbits in the simulator's parameters (implicit function theorem).
+
+Reference: central differences of orbits re-solved by Newton's method at each
+perturbed parameter value (:func:`bayeshopf.discrepancy.orbits.track`), which
+share nothing with the implicit solve but the integrator.
+"""
+
+import numpy as np
+import pytest
+
+from bayeshopf._x64 import ensure_x64
+
+ensure_x64()
+
+from bayeshopf.discrepancy.orbits import sensitivities, track  # noqa: E402
+from bayeshopf.discrepancy.prepare import prepare  # noqa: E402
+from bayeshopf.discrepancy.problem import Problem  # noqa: E402
+from bayeshopf.simulators import FLUTTER3DOF, simulate_recordings  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def problem():
+    rs = simulate_recordings(FLUTTER3DOF, [16.0, 17.0], ["stable", "unstable"], noise=0.01,
+                             duration_s=4.0, sample_rate_hz=250.0, seed=1)
+    unc = FLUTTER3DOF.uncertain
+    fitter, _, _ = prepare(rs, FLUTTER3DOF, parameters=[u.name for u in unc])
+    term = fitter.lib["h_cubic_stiffness"]
+    return Problem(fitter, unc, term, [(np.zeros(len(unc) + 1), fitter.base)])
+
+
+def test_jacobian_matches_central_differences_of_re_solved_orbits(problem):
+    x = np.zeros(problem.n)
+    x[0], x[4], x[-1] = 0.4, -0.3, 0.5         # k_h, c0 and the term away from nominal
+    G = problem.jacobian(x)
+    ob, _ = problem.solve(x)
+    assert ob.ok.all()
+    R, P = problem.fitter.mf.y.shape
+    h = 1e-4
+    for j in range(problem.n):
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        obp = track(problem.fitter.system, problem.params(x), problem.params(xp), ob,
+                    problem.fitter.stable)
+        obm = track(problem.fitter.system, problem.params(x), problem.params(xm), ob,
+                    problem.fitter.stable)
+        ref = (problem._E(xp, obp) - problem._E(xm, obm))[: R * P] / (2 * h)
+        scale = np.max(np.abs(ref))
+        assert scale > 1.0                       # every unknown moves the features
+        np.testing.assert_allclose(G[: R * P, j], ref, atol=1e-3 * scale,
+                                   err_msg=problem._column_params(j))
+    np.testing.assert_array_equal(G[R * P:], np.eye(problem.n))
+
+
+def test_periods_derivative_matches_re_solved_orbits(problem):
+    x = np.zeros(problem.n)
+    ob, _ = problem.solve(x)
+    p0 = problem.params(x)
+    dS, dT = sensitivities(problem.fitter.system, p0, ob, ["k_alpha", "dc_h_cubic_stiffness"])
+    for c, name in enumerate(["k_alpha", "dc_h_cubic_stiffness"]):
+        step = 1e-4 * max(abs(p0[name]), 1.0)
+        plus = track(problem.fitter.system, p0, {**p0, name: p0[name] + step}, ob,
+                     problem.fitter.stable)
+        minus = track(problem.fitter.system, p0, {**p0, name: p0[name] - step}, ob,
+                      problem.fitter.stable)
+        ref = (plus.period - minus.period) / (2 * step)
+        np.testing.assert_allclose(dT[:, c], ref, rtol=1e-4, atol=1e-12 * ob.period.max())
+    with pytest.raises(KeyError, match="parameters of the system expected"):
+        sensitivities(problem.fitter.system, p0, ob, ["no_such_parameter"])
