@@ -185,15 +185,14 @@ def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
     mu, sign = features.mu, np.where(features.unstable, -1.0, 1.0)
     se, omega_se = features.coeffs_se, features.omega_se
     key = jax.random.PRNGKey(seed)
-    if pipeline:
+    if pipeline or aligned:         # the draw without measurement noise, then measured
         d = draw_data(spec, mu, sign, np.zeros_like(se), key, omega_se=np.zeros_like(omega_se))
-        rs = synthesize(recordings, features.frame, d.coeffs, d.omega,
-                        np.random.default_rng(seed), duration=duration)
+        rng = np.random.default_rng(seed)
+    if pipeline:
+        rs = synthesize(recordings, features.frame, d.coeffs, d.omega, rng, duration=duration)
         f = extract_harmonics(rs, n_harmonics=spec.n_harmonics, frame=features.frame)
         data = (f.coeffs, f.coeffs_se, f.omega, f.omega_se)
     elif aligned:
-        d = draw_data(spec, mu, sign, np.zeros_like(se), key, omega_se=np.zeros_like(omega_se))
-        rng = np.random.default_rng(seed)
         data = (align(d.coeffs) + se * rng.standard_normal(se.shape), se,
                 d.omega + omega_se * rng.standard_normal(omega_se.shape), omega_se)
     else:
@@ -216,8 +215,8 @@ def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
 def results_path(name: str, pipeline: bool, duration: float | None, aligned: bool = False
                  ) -> Path:
     """``benchmarks/results/sbc_<design>[_pipeline[_<D>s] | _aligned].jsonl``."""
-    tag = "" if not pipeline else "_pipeline" + ("" if duration is None else f"_{duration:g}s")
-    tag = "_aligned" if aligned else tag
+    tag = ("_aligned" if aligned else "" if not pipeline
+           else "_pipeline" + ("" if duration is None else f"_{duration:g}s"))
     return RESULTS_DIR / f"sbc_{name}{tag}.jsonl"
 
 
@@ -295,7 +294,8 @@ def summary(seeds: list[int]) -> None:
             for y in (lo, hi):
                 ax.axhline(y, color="0.2", lw=0.8, ls="--", zorder=3)
             label = {"mu0": "μ0 (Hopf)", "mu_fold": "fold", "eta": "η"}[site]
-            ax.set_title(f"{name}: {label}  (χ² p = {s['chi2_p']:.2f})", fontsize=9)
+            p_text = "< 0.001" if s["chi2_p"] < 1e-3 else f"= {s['chi2_p']:.3f}"
+            ax.set_title(f"{name.replace('_', ', ')}: {label}  (χ² p {p_text})", fontsize=9)
             ax.set_xticks([0, BINS // 2, BINS])
             ax.set_xticklabels(["0", "0.5", "1"])
             if r == len(runs) - 1:

@@ -121,7 +121,7 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
             "sigma_rel": post.interval("sigma_rel").to_json(),
             "relative": interval(total).to_json()}
         d["fit"]["sigma_rel"] = float(np.median(total))
-    if post.spec.nn_training is not None and post.spec.nn_mu_scale is None:
+    if post.spec.samples_nu_mu:
         d["fit"]["nn_mu_scale"] = post.interval("nu_mu").to_json()
     if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
                                         or not post.spec.has_discrepancy):

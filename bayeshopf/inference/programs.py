@@ -47,7 +47,7 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
     if spec.has_discrepancy:
         v["eta"] = 0.5 * dm.ETA_PRIOR
         v["ell"] = dm.LENGTH_PRIOR[0]
-    if spec.nn_training is not None and spec.nn_mu_scale is None:
+    if spec.samples_nu_mu:
         v["nu_mu"] = nk.NU_PRIOR[0]
     if spec.criticality == "subcritical":
         v["gap_fold"] = 0.3 * spec.mu_span

@@ -379,7 +379,7 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
         h["eta"] = numpyro.sample("eta", dist.HalfNormal(dm.ETA_PRIOR))
         h["ell"] = numpyro.sample("ell", dist.LogNormal(np.log(dm.LENGTH_PRIOR[0]),
                                                         dm.LENGTH_PRIOR[1]))
-    if spec.nn_training is not None and spec.nn_mu_scale is None:
+    if spec.samples_nu_mu:
         h["nu_mu"] = numpyro.sample("nu_mu", dist.LogNormal(np.log(nk.NU_PRIOR[0]),
                                                             nk.NU_PRIOR[1]))
     return h

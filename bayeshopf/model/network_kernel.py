@@ -104,7 +104,7 @@ def harmonic_kernel(s_a, m_a, s_b, m_b, n_harmonics: int, n_phi: int):
 def _orbit_coordinates(spec: CollapsedSpec, theta: dict, mu, sign):
     """``(s, ν μ̃)`` of the orbits at ``(mu, sign)``: the network's circles."""
     s = radius(spec, mu, sign, theta) / reference_radius(spec, theta.get("a2", -1.0))
-    m = spec.mu_tilde(mu) * (theta["nu_mu"] if spec.nn_mu_scale is None else spec.nn_mu_scale)
+    m = spec.mu_tilde(mu) * (theta["nu_mu"] if spec.samples_nu_mu else spec.nn_mu_scale)
     return s, jnp.broadcast_to(m, jnp.shape(s))
 
 

@@ -88,6 +88,11 @@ class CollapsedSpec:
         """Whether the model includes the discrepancy Gaussian process."""
         return self.discrepancy_scale is not None
 
+    @property
+    def samples_nu_mu(self) -> bool:
+        """Whether the infinite-width network's input scale on ``μ̃`` is a site (``nu_mu``)."""
+        return self.nn_training is not None and self.nn_mu_scale is None
+
     def mu_tilde(self, mu):
         """``μ̃ = (μ − μ_c)/Δμ``."""
         return (mu - self.mu_centre) / self.mu_span
