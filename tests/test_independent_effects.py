@@ -64,6 +64,10 @@ ZERO = {
     "stall": lambda: ie.stall_saturation(F, math.inf),
     "cubic": lambda: ie.pitch_cubic_stiffness(F, 0.0),
     "perturbation": lambda: ie.perturb_params(F, {"k_h": 0.0, "c0": 0.0}),
+    "lagged moment": lambda: ie.lagged_pitch_moment(F, 0.0),
+    "coulomb": lambda: ie.coulomb_friction(F, 0.0, coordinate="alpha"),
+    **{f"library-like {k}": (lambda k=k: ie.LIBRARY_LIKE[k][0](F, 0.0))
+       for k in ie.LIBRARY_LIKE},
 }
 
 
@@ -107,6 +111,70 @@ def test_stribeck_friction_matches_the_law_by_hand():
     f = -0.02 * (1 + 0.5 / math.e) * 0.15 / math.sqrt(0.15**2 + 0.015**2)
     want = np.linalg.solve(_mass(), np.array([0.0, f, 0.0]))
     np.testing.assert_allclose(_dacc(eff, X, 16.0), np.tile(want, (4, 1)), rtol=1e-9)
+
+
+def test_library_like_forces_match_their_laws_by_hand():
+    X = _states(np.random.default_rng(5), 4)
+    X[:, 0] = [0.01, -0.02, 0.0, 0.03]           # h
+    X[:, 1] = [0.3, -0.5, 0.0, 0.2]              # h_dot
+    X[:, 2] = [0.05, -0.1, 0.02, 0.0]            # alpha
+    X[:, 3] = [1.0, -0.7, 0.0, 2.0]              # alpha_dot
+    h, hd, a, ad = X[:, 0], X[:, 1], X[:, 2], X[:, 3]
+    cases = {                                     # name, size -> (F_h, F_alpha) by hand
+        ("h_quadratic_stiffness", 2e4): (-2e4 * h * h, 0 * h),
+        ("h_cubic_stiffness", 3e5): (-3e5 * h**3, 0 * h),
+        ("h_quintic_stiffness", 5e8): (-5e8 * h**5, 0 * h),
+        ("h_quadratic_damping", 4.0): (-4.0 * hd * np.abs(hd), 0 * h),
+        ("alpha_cubic_damping", 0.1): (0 * h, -0.1 * ad**3),
+        ("alpha_quintic_stiffness", 5e4): (0 * h, -5e4 * a**5),
+        ("h_coulomb_friction", 0.2): (-0.2 * hd / np.sqrt(hd**2 + 0.005**2), 0 * h),
+    }
+    for (name, c), (fh, fa) in cases.items():
+        build, unit, param = ie.LIBRARY_LIKE[name]
+        eff = build(F, c)
+        assert eff.params[param] == c and eff.param_units[param] == unit
+        forces = np.stack([fh, fa, 0 * h], axis=1)
+        want = np.linalg.solve(_mass(), forces.T).T
+        np.testing.assert_allclose(_dacc(eff, X, 16.0), want, rtol=1e-9, atol=1e-12,
+                                   err_msg=name)
+    assert ie.LIBRARY_LIKE["h_cubic_stiffness"][1] == "N/m^3"
+    assert ie.LIBRARY_LIKE["alpha_quadratic_damping"][1] == "N m/(rad/s)^2"
+
+
+def test_lagged_moment_is_the_lift_lag_part_off_the_axis():
+    """F_α = e·b·(L_c(x) − L_c(x with w = ẇ = 0)): the lift's lag part, by subtraction."""
+    X = _states(np.random.default_rng(6), 6)
+    p = F.param_tree()
+    eff = ie.lagged_pitch_moment(F, 0.05)
+    for U in (14.0, 17.0):
+        X0 = X.copy()
+        X0[:, 4:] = 0.0
+        lag = np.array([float(ie.circulatory_lift(jnp.asarray(x), U, p)
+                              - ie.circulatory_lift(jnp.asarray(x0), U, p))
+                        for x, x0 in zip(X, X0, strict=True)])
+        forces = np.stack([0 * lag, 0.05 * P["b"] * lag, 0 * lag], axis=1)
+        want = np.linalg.solve(_mass(), forces.T).T
+        np.testing.assert_allclose(_dacc(eff, X, U), want, rtol=1e-9, atol=1e-12)
+    # linear: it moves the Hopf point (nose-up lag moment: earlier flutter)
+    assert find_hopf(eff).mu < HOPF - 0.1
+
+
+def test_coloured_noise_has_the_correlation_scale_and_outliers_asked():
+    from bayeshopf.simulators import simulate_recordings
+
+    rs = simulate_recordings(F, [16.0], "stable", noise=0.0, duration_s=20.0, seed=3)
+    before = {c: np.array(v) for c, v in rs[0].channels.items()}
+    noisy = ie.coloured_noise(rs, 0.02, phi=0.9, outlier_rate=0.01, outlier_scale=6.0,
+                              seed=4)
+    for c, z in before.items():
+        np.testing.assert_array_equal(rs[0].channels[c], z)       # inputs untouched
+        e = (np.asarray(noisy[0].channels[c]) - z) / (0.02 * z.std())
+        spikes = np.abs(e) > 5.0                  # AR(1) of unit variance: P(>5) ~ 6e-7
+        assert 0.005 * e.size < spikes.sum() < 0.016 * e.size
+        e = e[~spikes]
+        assert 0.85 < e.std() < 1.15
+        assert 0.86 < np.corrcoef(e[:-1], e[1:])[0, 1] < 0.94
+    assert noisy[0].name == rs[0].name and noisy.planar == rs.planar
 
 
 def test_viscous_part_and_cubic_stiffness_equal_the_simulators_own_parameters():

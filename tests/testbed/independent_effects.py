@@ -74,9 +74,11 @@ from bayeshopf.simulators import (
 from bayeshopf.simulators.recordings import N_ORBIT
 
 __all__ = [
-    "EFFECTS", "OrbitSet", "blind_recordings", "circulatory_lift", "dead_band",
-    "perturb_params", "pitch_cubic_stiffness", "pitch_freeplay", "stable_orbit",
-    "stall_saturation", "stribeck_force", "stribeck_friction", "tracked_orbit",
+    "EFFECTS", "LIBRARY_LIKE", "POLYNOMIAL_KINDS", "OrbitSet", "blind_recordings",
+    "circulatory_lift", "coloured_noise", "coulomb_friction", "dead_band", "lagged_lift",
+    "lagged_pitch_moment", "perturb_params", "pitch_cubic_stiffness", "pitch_freeplay",
+    "polynomial_force", "stable_orbit", "stall_saturation", "stribeck_force",
+    "stribeck_friction", "tracked_orbit",
 ]
 
 
@@ -428,6 +430,170 @@ def pitch_cubic_stiffness(system: System, k3: float) -> System:
                        {"ie_cubic_k3": "N m/rad^3"})
 
 
+# --------------------------------------------------------------------------- (e) library-like
+
+
+#: Forces of the library's kinds, written here from their equations: ``kind -> (force of
+#: (q, q_dot, c), unit suffix)``. Stiffness acts on the displacement, damping on the velocity.
+POLYNOMIAL_KINDS = {
+    "quadratic_stiffness": (lambda q, v, c: -c * q * q, "/{q}^2"),
+    "cubic_stiffness": (lambda q, v, c: -c * q * q * q, "/{q}^3"),
+    "quintic_stiffness": (lambda q, v, c: -c * q**5, "/{q}^5"),
+    "quadratic_damping": (lambda q, v, c: -c * v * jnp.abs(v), "/({q}/s)^2"),
+    "cubic_damping": (lambda q, v, c: -c * v * v * v, "/({q}/s)^3"),
+}
+
+
+def polynomial_force(system: System, coefficient: float, *, coordinate: str = "h",
+                     kind: str = "cubic_stiffness") -> System:
+    r"""A polynomial spring or damper on one coordinate (a library-like effect, written here).
+
+    .. math::
+
+        F_q = -c\,q^2,\ -c\,q^3,\ -c\,q^5 \quad\text{(stiffness)}, \qquad
+        F_q = -c\,\dot q\,|\dot q|,\ -c\,\dot q^3 \quad\text{(damping)},
+
+    on ``coordinate`` only, the other generalised forces 0.
+
+    Args:
+        system: ``flutter3dof`` or a copy.
+        coefficient: :math:`c` (N or N m over the power of m, rad, m/s or rad/s),
+            any sign; 0 is the nominal system.
+        coordinate: ``"h"`` or ``"alpha"``.
+        kind: A key of :data:`POLYNOMIAL_KINDS`.
+
+    **Same physics as the library's** ``<q>_<kind>`` (positive :math:`c` adds
+    to the restoring or damping force), written without it: no smoothing of
+    :math:`|\dot q|` (the library smooths it near 0).
+    """
+    if kind not in POLYNOMIAL_KINDS:
+        raise SimulationError(f"polynomial force: kind expected among "
+                              f"{', '.join(POLYNOMIAL_KINDS)}; got {kind!r}")
+    c = _finite(f"{kind} coefficient", coefficient)
+    iq, kq, kv = _index(system, coordinate)
+    law, suffix = POLYNOMIAL_KINDS[kind]
+    nc = len(system.coordinates)
+    qu = "m" if coordinate == "h" else "rad"
+    fu = "N" if coordinate == "h" else "N m"
+    key = f"ie_poly_{coordinate}_{kind}"
+
+    def force(x, U, p):
+        return jnp.zeros(nc, dtype=x.dtype).at[iq].set(law(x[kq], x[kv], p[key]))
+
+    return _with_force(system, force, key, {key: c}, {key: fu + suffix.format(q=qu)})
+
+
+def coulomb_friction(system: System, level: float, *, coordinate: str = "h") -> System:
+    r"""Dry (Coulomb) friction without a Stribeck dip: :func:`stribeck_friction` at :math:`r_s = 1`.
+
+    .. math::  F_q = -F_c\,\frac{\dot q}{\sqrt{\dot q^2 + v_r^2}}
+
+    (the library's ``<q>_coulomb_friction`` is :math:`-c\tanh(\dot q/\varepsilon_v)`:
+    the same physics, another regularisation and width).
+    """
+    return stribeck_friction(system, level, coordinate=coordinate, static_ratio=1.0)
+
+
+def lagged_lift(x, U, p):
+    r"""The lagged (Wagner) part of the circulatory lift, N per m span (:func:`circulatory_lift`).
+
+    .. math::  L_w = 2\pi\rho b U\Big[U(c_1c_2 + c_3c_4)\,\dot w
+               + \tfrac{U^2}{b}c_2c_4(c_1+c_3)\,w\Big].
+    """
+    w, w_dot = x[4], x[5]
+    b, rho = p["b"], p["rho"]
+    c1, c2, c3, c4 = p["c1"], p["c2"], p["c3"], p["c4"]
+    return 2.0 * jnp.pi * rho * b * U * (U * (c1 * c2 + c3 * c4) * w_dot
+                                         + U**2 / b * c2 * c4 * (c1 + c3) * w)
+
+
+def lagged_pitch_moment(system: System, offset: float) -> System:
+    r"""A lagged aerodynamic pitching moment: the lift's lag part acting off the elastic axis.
+
+    .. math::  F_\alpha = e\,b\,L_w(w, \dot w, U), \qquad F_h = F_w = 0,
+
+    with :math:`L_w` the lagged part of the circulatory lift (:func:`lagged_lift`):
+    as if that part of the lift acted :math:`e` semichords ahead of the elastic
+    axis (positive :math:`e`: nose-up), while the simulator puts all of it at the
+    quarter chord (on the elastic axis for :math:`a = -\tfrac12`).
+
+    Args:
+        system: ``flutter3dof`` or a copy.
+        offset: :math:`e` (semichords), any sign; 0 is the nominal system.
+
+    **Differs from every library term**: it depends on the aerodynamic lag state
+    :math:`w` and on :math:`U`, and it is linear, so it moves the Hopf point.
+    """
+    e = _finite("lagged moment offset (semichords)", offset)
+    ia, _, _ = _index(system, "alpha")
+    nc = len(system.coordinates)
+
+    def force(x, U, p):
+        return jnp.zeros(nc, dtype=x.dtype).at[ia].set(
+            p["ie_lag_offset"] * p["b"] * lagged_lift(x, U, p))
+
+    return _with_force(system, force, "ie_lag_moment", {"ie_lag_offset": e},
+                       {"ie_lag_offset": "semichord"})
+
+
+#: Library-like effects written here, by the library term whose physics each is:
+#: ``term name -> (builder(system, size), size unit, size parameter)``.
+LIBRARY_LIKE = {
+    **{f"{c}_{k}": ((lambda s, v, c=c, k=k: polynomial_force(s, v, coordinate=c, kind=k)),
+                    ("N" if c == "h" else "N m")
+                    + POLYNOMIAL_KINDS[k][1].format(q="m" if c == "h" else "rad"),
+                    f"ie_poly_{c}_{k}")
+       for c in ("h", "alpha") for k in POLYNOMIAL_KINDS},
+    "h_coulomb_friction": (lambda s, v: coulomb_friction(s, v, coordinate="h"), "N",
+                           "ie_friction_coulomb"),
+    "alpha_coulomb_friction": (lambda s, v: coulomb_friction(s, v, coordinate="alpha"),
+                               "N m", "ie_friction_coulomb"),
+    "alpha_freeplay": (lambda s, v: pitch_freeplay(s, v), "rad", "ie_freeplay_gap"),
+}
+
+
+# --------------------------------------------------------------------------- noise
+
+
+def coloured_noise(recordings, fraction: float, *, phi: float = 0.9,
+                   outlier_rate: float = 0.0, outlier_scale: float = 6.0, seed: int = 0):
+    r"""The recordings with coloured noise and occasional outliers added (a new set).
+
+    Each channel gets :math:`\sigma e_t`, with :math:`\sigma` = ``fraction`` times
+    the channel's standard deviation and :math:`e` a stationary AR(1) process of
+    unit variance, :math:`e_t = \phi e_{t-1} + \sqrt{1-\phi^2}\,\xi_t`,
+    :math:`\xi_t \sim \mathcal N(0, 1)`; each sample is, with probability
+    ``outlier_rate``, moved by a spike :math:`\pm\sigma s\,(1 + |\zeta|)`,
+    ``s`` = ``outlier_scale``, :math:`\zeta \sim \mathcal N(0, 1)`, random sign.
+    The likelihood of :mod:`bayeshopf` assumes neither the correlation nor the
+    outliers. Names, times and metadata are kept; the inputs are not changed.
+    """
+    from scipy.signal import lfilter
+
+    from bayeshopf.data.recording import RecordingSet
+
+    fraction = _finite("noise fraction", fraction, lo=0.0)
+    phi = _finite("AR(1) coefficient", phi, lo=0.0)
+    if phi >= 1.0:
+        raise SimulationError(f"AR(1) coefficient: a number in [0, 1) expected; got {phi!r}")
+    rate = _finite("outlier rate", outlier_rate, lo=0.0)
+    rng = np.random.default_rng(seed)
+    out = []
+    for r in recordings:
+        chans = {}
+        for name, z in r.channels.items():
+            z = np.asarray(z, float)
+            sigma = fraction * float(np.std(z))
+            e = lfilter([math.sqrt(1.0 - phi * phi)], [1.0, -phi], rng.standard_normal(z.size),
+                        zi=[phi * rng.standard_normal()])[0]
+            spikes = (rng.random(z.size) < rate) * rng.choice([-1.0, 1.0], z.size) * (
+                outlier_scale * (1.0 + np.abs(rng.standard_normal(z.size))))
+            chans[name] = z + sigma * (e + spikes)
+        out.append(dataclasses.replace(r, channels=chans))
+    return RecordingSet(tuple(out), recordings.planar, mu_label=recordings.mu_label,
+                        mu_units=recordings.mu_units, extra=dict(recordings.extra))
+
+
 #: The effects by name: ``name -> (builder(system, size), size unit, size parameter)``.
 #: The size parameter is the one :func:`tracked_orbit` continues from 0 (for the stall:
 #: the inverse saturation angle, 0 for none).
@@ -438,6 +604,7 @@ EFFECTS = {
     "pitch_stribeck_friction": (lambda s, v: stribeck_friction(s, v, coordinate="alpha"),
                                 "N m", "ie_friction_coulomb"),
     "stall_saturation": (stall_saturation, "rad", "ie_stall_inv_angle"),
+    "lagged_pitch_moment": (lagged_pitch_moment, "semichord", "ie_lag_offset"),
     "pitch_cubic_stiffness": (pitch_cubic_stiffness, "N m/rad^3", "ie_cubic_k3"),
 }
 #: Base-parameter errors for comparison: ``perturb_<name>`` changes ``name`` by a relative
