@@ -492,7 +492,7 @@ def marginal_coverage(sets: list[dict]) -> dict[str, tuple[int, int]]:
             params, group = fits[0]["parameters"], "(c)"
         else:
             params, group = r["report"]["calibration"]["parameters"], "(a)–(b)"
-        for p in params:
+        for p in params or ():          # a screened term's fit has no parameters' posterior
             lo, hi = p["ci90"]
             inside = int(lo <= p["nominal"] * (1 + pert.get(p["name"], 0.0)) <= hi)
             for key in ("all", "perturbed") if p["name"] in pert else ("all",):
