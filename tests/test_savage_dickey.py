@@ -18,11 +18,13 @@ from scipy import integrate, special, stats
 from bayeshopf.discrepancy.calibration import _classes, _log_priors, _probabilities
 from bayeshopf.discrepancy.evidence import laplace_evidence
 from bayeshopf.discrepancy.nested import (
+    SCALES,
     SD_RANGE,
     CoefficientPosterior,
     class_bayes_factors,
     gaussian_marginal,
     log_bayes_factor,
+    mixture_log_bf,
     nested_log_z,
     sensitivity,
     use_savage_dickey,
@@ -205,14 +207,15 @@ def test_a_parameters_fit_that_stopped_short_does_not_lose_to_a_nested_term():
     f = _fit("t", post, log_z=lzp_true + 1.0)
     lz, how = nested_log_z(lzp_true - 30.0, [f], [])
     assert how["t"] == "savage-dickey vs parameters"
-    assert lz["t"] - (lzp_true - 30.0) == pytest.approx(log_bayes_factor(post))
+    assert lz["t"] - (lzp_true - 30.0) == pytest.approx(mixture_log_bf(post))
     assert lz["t"] - (lzp_true - 30.0) < 0.5                 # no credit for M_P's stop
     # the larger model's polish charge is kept
     lz, how = nested_log_z(lzp_true - 30.0, [_fit("t", post, penalty=5.0, log_z=-99.0)], [])
-    assert lz["t"] == pytest.approx(lzp_true - 30.0 + log_bayes_factor(post) - 5.0)
+    assert lz["t"] == pytest.approx(lzp_true - 30.0 + mixture_log_bf(post) - 5.0)
     # screened: the fit keeps its own evidence
     lz, how = nested_log_z(lzp_true - 30.0, [_fit("t", post, refined=False, log_z=-99.0)], [])
-    assert how["t"] == "laplace" and lz["t"] == -99.0
+    assert how["t"] == "laplace"
+    assert lz["t"] == pytest.approx(-99.0 + mixture_log_bf(post) - log_bayes_factor(post))
 
 
 def test_a_pair_is_nested_in_its_more_probable_single_term():
@@ -226,8 +229,22 @@ def test_a_pair_is_nested_in_its_more_probable_single_term():
     lz, how = nested_log_z(lzp, singles, [pair])
     k = "a" if lz["a"] > lz["b"] else "b"
     assert how["a+b"] == f"savage-dickey vs {k}"
-    assert lz["a+b"] == pytest.approx(_exact_log_z([B1, B2]), abs=1e-9)
-    assert lz["a"] == pytest.approx(_exact_log_z([B1]), abs=1e-9)
+    # the scale-free prior (nested.py): each single's evidence is its exact evidence
+    # averaged over the factor f of its prior scale ...
+    for name, col in (("a", B1), ("b", B2)):
+        assert lz[name] == pytest.approx(special.logsumexp(
+            [_exact_log_z([col], f) for f in SCALES]) - np.log(len(SCALES)), abs=1e-9)
+    # ... and the pair's adds the second coefficient's exact Bayes factor averaged over its
+    # own f, the first at its library scale
+    first, second = (B1, B2) if k == "a" else (B2, B1)
+
+    def log_z_two(f):
+        cov = np.eye(N) + A @ A.T + np.outer(first, first) + f**2 * np.outer(second, second)
+        return _log_gauss(Y, cov)
+
+    bf = special.logsumexp([log_z_two(f) for f in SCALES]) - np.log(len(SCALES)) \
+        - _exact_log_z([first])
+    assert lz["a+b"] == pytest.approx(lz[k] + bf, abs=1e-9)
 
 
 # --------------------------------------------------------------- class Bayes factors

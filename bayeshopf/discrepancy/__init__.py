@@ -13,8 +13,10 @@ effect in simulated recordings to test it blind.
 :func:`calibrate` first calibrates the parameters a simulator declares
 uncertain (``System.uncertain``) as nuisance parameters, then fits each term
 (and pairs of terms) jointly with them, with the model error inferred, and
-tells "the parameters are off" from "a term is missing"
-(:mod:`bayeshopf.discrepancy.calibration`). :func:`analyse` and the command
+tells "the parameters are off" from "a term is missing" and from
+"unexplained", a smooth discrepancy no term accounts for
+(:mod:`bayeshopf.discrepancy.calibration`, :mod:`bayeshopf.discrepancy.unexplained`).
+:func:`analyse` and the command
 use it by default for such systems (``calibrate=False``, ``--no-calibration``:
 every parameter nominal, single terms).
 
@@ -23,7 +25,8 @@ Its modules, in the order the analysis uses them: ``features``,
 nominal), ``prepare`` (what both analyses start from), ``locate``,
 ``stages`` (one model's fit), ``single`` and ``calibrated``
 (the two analyses' reports), ``calibration`` with ``problem``,
-``evidence``, ``fitting``, ``records`` and ``verdict``,
+``evidence``, ``fitting``, ``nested``, ``unexplained``, ``records`` and
+``verdict``,
 ``render`` (``report.md``), ``analysis`` (the front door),
 ``effects`` (planted effects for blind tests).
 """

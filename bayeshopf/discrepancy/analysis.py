@@ -40,7 +40,8 @@ nuisance parameters, fits the library's terms jointly with them and gives the
 verdict ``"none"``, ``"parameters off"``, ``"term missing"`` or
 ``"unexplained"``, copied whole into the report with the calibration itself
 (``"calibration"``), its models (``"models"``: none, parameters calibrated,
-each term and pair of terms with probability, log evidence and coefficient)
+the smooth discrepancy, each term and pair of terms with probability, log
+evidence and coefficient)
 and the parameters of the final model (``"parameters"``). The fit is
 reported in up to three stages, each with the errors per channel, the Hopf
 point and fold of a continuation of the model at its posterior medians, and
@@ -146,7 +147,7 @@ def analyse(recordings: RecordingSet, system: System | str, *, seed: int = 0,
             monotone in one coefficient over so short an interval). With
             calibration the points are those of the posterior medians only.
         calibrate: Calibrate the simulator's uncertain parameters first and compare
-            "nothing wrong", "parameters off" and "a term missing"
+            "nothing wrong", "parameters off", "a term missing" and "unexplained"
             (:func:`bayeshopf.discrepancy.calibration.calibrate`; module
             docstring, "With calibration"). ``None``: when the system declares
             uncertain parameters (``system.uncertain``); ``False``: every

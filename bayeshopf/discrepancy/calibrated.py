@@ -133,6 +133,13 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
          "probability": float(rep.probabilities["parameters"]),
          "log_evidence": float(rep.log_z["parameters"]), "chi2": float(cal.chi2),
          "coefficient": None, "parameters_off": list(cal.off)}]
+    if rep.unexplained is not None:
+        models.append({
+            "name": "unexplained", "label": "parameters calibrated + smooth discrepancy",
+            "probability": float(rep.probabilities["unexplained"]),
+            "log_evidence": float(rep.log_z["unexplained"]), "chi2": float(cal.chi2),
+            "coefficient": None, "discrepancy": rep.unexplained.to_json()})
+    n_fixed = len(models)
     for f in rep.terms:
         models.append({
             "name": f.term.name, "label": f.term.name,
@@ -151,7 +158,7 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
                              for t, m, ci in zip(f.terms, f.medians, f.ci90, strict=True)],
             "refined": f.refined, "evidence": f.evidence,
             "parameters_off": [p.name for p in f.parameters if p.off]})
-    models[2:] = sorted(models[2:], key=lambda m: -m["probability"])
+    models[n_fixed:] = sorted(models[n_fixed:], key=lambda m: -m["probability"])
     data = {
         "verdict": verdict,
         "parameters": {"model": label, "table": [p.to_json() for p in final_params]},

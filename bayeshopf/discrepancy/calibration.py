@@ -11,7 +11,10 @@ compared by their evidence:
 * :math:`M_0`, **nominal**: every parameter at its nominal value, no term;
 * :math:`M_P`, **parameters off**: the uncertain parameters calibrated, no term;
 * :math:`M_k`, **term k missing**: the uncertain parameters calibrated jointly
-  with the coefficient of library term :math:`k`.
+  with the coefficient of library term :math:`k`;
+* :math:`M_D`, **unexplained**: the uncertain parameters calibrated, and a
+  smooth discrepancy of the orbits' fundamentals over the diagram
+  (:mod:`~bayeshopf.discrepancy.unexplained`).
 
 The pieces: the stacked residuals, their Jacobian and the least-squares fit
 (:mod:`~bayeshopf.discrepancy.problem`); the Laplace evidence and the relative
@@ -44,13 +47,19 @@ named steps:
    probable class, by pinning them at nominal; a pinned refit that lands below
    the mode shows the mode was a local one, and the model is refitted from
    there (:func:`_check_best`).
-5. **Verdict** (:func:`~bayeshopf.discrepancy.verdict.build_verdict`).
+5. **Unexplained**: :math:`M_D` at the final calibration
+   (:func:`~bayeshopf.discrepancy.unexplained.unexplained`).
+6. **Verdict** (:func:`~bayeshopf.discrepancy.verdict.build_verdict`): the most
+   probable class.
 
-**Model probabilities.** Prior probability 1/3 for each of "nothing wrong"
-(:math:`M_0`), "parameters off" (:math:`M_P`) and "a term missing", the last
-shared by the :math:`n` single terms (1/6) and the :math:`n(n-1)/2` pairs (1/6);
-:math:`P(M \mid y) \propto \pi_M Z_M` (:func:`_probabilities`). Without the
-scan, 1/2 each for :math:`M_0` and :math:`M_P`. A term model nested on
+**Model probabilities.** Prior probability 1/4 for each of "nothing wrong"
+(:math:`M_0`), "parameters off" (:math:`M_P`), "unexplained" (:math:`M_D`)
+and "a term missing", the last shared by the :math:`n` single terms (1/8) and
+the :math:`n(n-1)/2` pairs (1/8); :math:`P(M \mid y) \propto \pi_M Z_M`
+(:func:`_probabilities`). Without the scan, 1/3 each for :math:`M_0`,
+:math:`M_P` and :math:`M_D`. Every term's coefficient has the scale-free prior
+of :mod:`~bayeshopf.discrepancy.nested` (its prior scale times a factor
+log-uniform over three decades). A term model nested on
 :math:`M_P` (or a pair on one of its terms) whose fit is confirmed at its mode
 takes :math:`Z_M` from the Savage–Dickey ratio on its coefficients' marginal
 (:mod:`~bayeshopf.discrepancy.nested`, which argues where), so it neither wins
@@ -124,8 +133,8 @@ from bayeshopf.discrepancy.records import (
 )
 from bayeshopf.discrepancy.select import ALPHA, TIE_FACTOR, Fitter
 from bayeshopf.discrepancy.terms import KINDS, Library
+from bayeshopf.discrepancy.unexplained import unexplained
 from bayeshopf.discrepancy.verdict import (
-    EXPLAINED_FACTOR,
     MIN_MODEL_ERROR,
     build_verdict,
     with_bayes_factors,
@@ -133,7 +142,7 @@ from bayeshopf.discrepancy.verdict import (
 from bayeshopf.simulators.base import System, UncertainParameter
 from bayeshopf.simulators.registry import get_system
 
-__all__ = ["ALPHA", "EXPLAINED_FACTOR", "KIND_NONE", "KIND_PARAMS", "KIND_TERM",
+__all__ = ["ALPHA", "KIND_NONE", "KIND_PARAMS", "KIND_TERM",
            "KIND_UNEXPLAINED", "MAX_NFEV", "MIN_MODEL_ERROR", "N_PAIR", "N_PAIR_REFINE",
            "N_REFINE", "OFF_LEVEL", "PAIR_REFINE", "SCREEN_NATS", "TAU_START", "TIE_FACTOR",
            "Z90", "CalibratedPairFit", "CalibratedTermFit", "Calibration", "CalibrationError",
@@ -164,10 +173,10 @@ def _log_priors(fits: Sequence[CalibratedTermFit], pair_fits: Sequence[Calibrate
                 scan: bool, pairs: int, n: int) -> dict[str, float]:
     """Log prior probability of every model (module docstring, "Model probabilities")."""
     if not scan:
-        return {"none": np.log(0.5), "parameters": np.log(0.5)}
-    lp = {"none": np.log(1 / 3), "parameters": np.log(1 / 3)}
-    lp.update({f.term.name: np.log(1 / 3 / (2 if pairs else 1) / n) for f in fits})
-    lp.update({f.name: np.log(1 / 6 / (n * (n - 1) // 2)) for f in pair_fits})
+        return {k: np.log(1 / 3) for k in ("none", "parameters", "unexplained")}
+    lp = {k: np.log(1 / 4) for k in ("none", "parameters", "unexplained")}
+    lp.update({f.term.name: np.log(1 / 4 / (2 if pairs else 1) / n) for f in fits})
+    lp.update({f.name: np.log(1 / 8 / (n * (n - 1) // 2)) for f in pair_fits})
     return lp
 
 
@@ -177,7 +186,8 @@ def _probabilities(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit]
     """Posterior probability of every model (module docstring, "Model probabilities").
 
     Args:
-        log_z: Log evidence of ``"none"`` and ``"parameters"``.
+        log_z: Log evidence of ``"none"``, ``"parameters"`` and (where compared)
+            ``"unexplained"``.
         fits: The single terms.
         pair_fits: The pairs.
         scan: Whether the terms are compared at all.
@@ -185,8 +195,9 @@ def _probabilities(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit]
         n: Number of terms in the library.
     """
     lp = _log_priors(fits, pair_fits, scan=scan, pairs=pairs, n=n)
-    lz = {"none": log_z["none"], "parameters": log_z["parameters"],
-          **{f.term.name: f.log_z for f in fits}, **{f.name: f.log_z for f in pair_fits}}
+    lz = {k: log_z[k] for k in ("none", "parameters", "unexplained") if k in log_z}
+    lz.update({f.term.name: f.log_z for f in fits})
+    lz.update({f.name: f.log_z for f in pair_fits})
     lw = np.array([lp[k] + lz[k] for k in lz])
     w = np.exp(lw - lw.max())
     return dict(zip(lz, (float(v) for v in w / w.sum()), strict=True))
@@ -221,7 +232,7 @@ def _bayes(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit],
     """
     lp = _log_priors(fits, pair_fits, scan=scan, pairs=pairs, n=n)
     bayes = class_bayes_factors(lp, log_z, {
-        KIND_NONE: ["none"], KIND_PARAMS: ["parameters"],
+        KIND_NONE: ["none"], KIND_PARAMS: ["parameters"], KIND_UNEXPLAINED: ["unexplained"],
         KIND_TERM: [f.term.name for f in fits] + [f.name for f in pair_fits]})
     top = sorted(fits, key=lambda f: -probs[f.term.name])[:2]
     top += [f for f in pair_fits if f.name == best_model]
@@ -241,10 +252,11 @@ def _bayes(log_z: Mapping[str, float], fits: Sequence[CalibratedTermFit],
 
 def _classes(probs: Mapping[str, float], fits: Sequence[CalibratedTermFit],
              pair_fits: Sequence[CalibratedPairFit]) -> dict[str, float]:
-    """Probability of each class: nothing wrong, parameters off, a term (or pair) missing."""
+    """Probability of each class: nothing wrong, parameters off, a term missing, unexplained."""
     return {KIND_NONE: probs["none"], KIND_PARAMS: probs["parameters"],
             KIND_TERM: float(sum(probs[f.term.name] for f in fits)
-                             + sum(probs[f.name] for f in pair_fits))}
+                             + sum(probs[f.name] for f in pair_fits)),
+            KIND_UNEXPLAINED: probs.get("unexplained", 0.0)}
 
 
 def _best_model(best_class: str, probs: Mapping[str, float],
@@ -255,6 +267,8 @@ def _best_model(best_class: str, probs: Mapping[str, float],
         return "none"
     if best_class == KIND_PARAMS:
         return "parameters"
+    if best_class == KIND_UNEXPLAINED:
+        return "unexplained"
     return max([f.term.name for f in fits] + [f.name for f in pair_fits], key=probs.get)
 
 
@@ -390,7 +404,7 @@ def _check_best(best_model: str, unc: Sequence[UncertainParameter], cal: Calibra
     """
     fits, pair_fits = list(fits), list(pair_fits)
     for attempt in range(2):
-        if best_model == "parameters":
+        if best_model in ("parameters", "unexplained"):       # M_D has M_P's parameters
             checked, better = check_off(cal.fitter, unc, (), cal.z_mode, cal.orbits,
                                         cal.parameters, me_best.median)
             if better is not None and attempt == 0:
@@ -497,8 +511,9 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     cal, compromise = _calibrate_parameters(fitter, unc, dof0, max_nfev)
     fitter = cal.fitter
     secs["calibrate"] = time.perf_counter() - t1
-    log_z = {"none": me0.log_z, "parameters": cal.log_z}
-    errors = {"none": me0, "parameters": cal.model_error}
+    md = unexplained(cal)
+    log_z = {"none": me0.log_z, "parameters": cal.log_z, "unexplained": md.log_z}
+    errors = {"none": me0, "parameters": cal.model_error, "unexplained": cal.model_error}
     n = len(lib.terms)
 
     def probabilities(fits, pair_fits) -> dict[str, float]:
@@ -541,6 +556,8 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
                                        max_nfev)
     # a refit of the best model (or of M_P) moves the evidences nested on it
     log_z["parameters"], errors["parameters"] = cal.log_z, cal.model_error
+    md = unexplained(cal)
+    log_z["unexplained"], errors["unexplained"] = md.log_z, cal.model_error
     fits, pair_fits = _nest(log_z["parameters"], fits, pair_fits)
     for f in fits:
         log_z[f.term.name], errors[f.term.name] = f.log_z, f.model_error
@@ -552,9 +569,12 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     classes = _classes(probs, fits, pair_fits)
     secs["check off"] = time.perf_counter() - t1
 
-    # 5. the verdict
+    best_class = max(classes, key=classes.get)
+    best_model = _best_model(best_class, probs, fits, pair_fits)
+
+    # 5., 6. the verdict
     verdict = build_verdict(system, lib, fitter, cal, fits, pair_fits, probs, classes,
-                            best_class, best_model, me0, errors[best_model], notes)
+                            best_class, best_model, me0, errors[best_model], notes, md)
     verdict = with_bayes_factors(verdict, *_bayes(log_z, fits, pair_fits, probs, best_model,
                                                   scan=scan, pairs=pairs, n=n))
     secs["total"] = time.perf_counter() - t0
@@ -562,4 +582,4 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
                              probabilities=probs, class_probabilities=classes,
                              chi2_nominal=chi0, n_features=dof0, calibration=cal,
                              terms=tuple(fits), pairs=tuple(pair_fits),
-                             model_errors=errors, seconds=secs)
+                             model_errors=errors, seconds=secs, unexplained=md)

@@ -50,6 +50,24 @@ nested in each of its single terms: its evidence is the Savage–Dickey ratio on
 the other coefficient's marginal (same rule, its own charge kept) added to the
 evidence of its more probable single term.
 
+**A scale-free prior on a term's size** (:func:`mixture_log_bf`). The
+library's prior scale :math:`s` of a coefficient is that of a gross error
+(:mod:`~bayeshopf.discrepancy.terms`); a term hidden in a simulator is as
+plausible at a thousandth of it as at all of it. The coefficient's prior is
+therefore the scale mixture :math:`c \mid f \sim \mathcal N(0, f^2 s^2)`,
+:math:`f` log-uniform on :data:`SCALE_RANGE` (a half-normal mixture for a
+coefficient bounded at 0), and every term model's evidence is averaged over
+:math:`f` on :data:`N_SCALES` quantile points:
+:math:`Z_k = \overline{Z_k(f)}`, each :math:`Z_k(f)/Z_k(1)` from the Gaussian
+algebra below ("Sensitivity"), exact for residuals linear in the unknowns. A
+term the data resolve at a few standard deviations no longer pays the Occam
+factor of a gross-error prior; a term of no effect costs little (its small
+scales are indistinguishable from :math:`M_P`), and one the data exclude still
+loses. The fits, and the intervals of the coefficients, stay those at
+:math:`f = 1`. A pair's second coefficient gets its own :math:`f`
+(Savage–Dickey against its single term); a pair that keeps its own Laplace
+evidence mixes one :math:`f` for both.
+
 **Bayes factors apart from the prior odds** (:func:`class_bayes_factors`).
 A class's evidence is its models' evidences averaged with their prior
 weights within the class, :math:`Z_c = \sum_{M\in c}\pi_M Z_M / \sum_{M\in c}\pi_M`,
@@ -73,20 +91,32 @@ the Bayes factor follows without a new fit. Over :math:`\tau`, with
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import integrate, special, stats
+from scipy import special, stats
 
-__all__ = ["BAND_FACTORS", "SD_RANGE", "CoefficientPosterior",
-           "class_bayes_factors", "gaussian_log_bf", "gaussian_marginal", "log_bayes_factor",
-           "nested_log_z", "sensitivity", "use_savage_dickey"]
+__all__ = ["BAND_FACTORS", "N_SCALES", "SCALES", "SCALE_RANGE", "SD_RANGE",
+           "CoefficientPosterior", "class_bayes_factors", "gaussian_log_bf",
+           "gaussian_marginal", "log_bayes_factor", "mixture_log_bf", "mixture_shift",
+           "nested_log_z",
+           "sensitivity", "use_savage_dickey"]
 
 #: Savage–Dickey is used when 0 lies within this many posterior standard deviations.
 SD_RANGE = 4.0
 #: Factors of every term's prior scale in the sensitivity band.
 BAND_FACTORS = (0.5, 2.0)
+#: Range of the factor f of a term's prior scale (log-uniform): from a thousandth of a
+#: gross error to a gross error.
+SCALE_RANGE = (1e-3, 1.0)
+#: Quantile points of f on which the evidence is averaged.
+N_SCALES = 12
+#: The factors: midpoint quantiles of the log-uniform prior of f.
+SCALES = tuple(float(v) for v in np.exp(
+    np.log(SCALE_RANGE[0]) + (np.arange(N_SCALES) + 0.5) / N_SCALES
+    * np.log(SCALE_RANGE[1] / SCALE_RANGE[0])))
 
 
 @dataclass(frozen=True)
@@ -108,11 +138,34 @@ class CoefficientPosterior:
     positive: tuple[bool, ...] = ()
 
     def sub(self, idx: Sequence[int]) -> CoefficientPosterior:
-        """The marginal of the coefficients ``idx``."""
-        idx = list(idx)
-        return CoefficientPosterior(self.weights, self.mean[:, idx],
-                                    self.cov[:, idx][:, :, idx],
-                                    tuple(self.positive[i] for i in idx))
+        """The marginal of the coefficients ``idx`` (one object per ``idx``: its caches kept)."""
+        idx = tuple(int(i) for i in idx)
+        subs = self.__dict__.setdefault("_subs", {})
+        if idx not in subs:
+            subs[idx] = CoefficientPosterior(self.weights, self.mean[:, list(idx)],
+                                             self.cov[:, list(idx)][:, :, list(idx)],
+                                             tuple(self.positive[i] for i in idx))
+        return subs[idx]
+
+    @functools.cached_property
+    def thinned(self) -> CoefficientPosterior:
+        """The marginal at the fewest τ that hold 99.9% of the weight (at most 6), reweighted."""
+        order = np.argsort(self.weights)[::-1]
+        n = min(int(np.searchsorted(np.cumsum(self.weights[order]), 0.999)) + 1, 6,
+                order.size)
+        k = np.sort(order[:n])
+        w = self.weights[k]
+        return CoefficientPosterior(w / w.sum(), self.mean[k], self.cov[k], self.positive)
+
+    @functools.cached_property
+    def log_bf(self) -> float:
+        """:func:`log_bayes_factor` at the library's prior scale (computed once)."""
+        return log_bayes_factor(self)
+
+    @functools.cached_property
+    def mixture_log_bf(self) -> float:
+        """:func:`mixture_log_bf` (computed once)."""
+        return mixture_log_bf(self)
 
     @property
     def distance(self) -> float:
@@ -141,6 +194,40 @@ def gaussian_marginal(E: np.ndarray, G: np.ndarray, x: np.ndarray, k: int
     return (np.asarray(x, float)[-k:] + delta[-k:]), cov[-k:, -k:]
 
 
+#: Gauss–Legendre nodes and weights on [0, 1] of each panel of :func:`_orthant2`.
+_GL = tuple((x + 1) / 2 for x in np.polynomial.legendre.leggauss(32)[:1]) + (
+    np.polynomial.legendre.leggauss(32)[1] / 2,)
+
+
+def _orthant2(m: np.ndarray, C: np.ndarray) -> float:
+    r"""``log P(ζ ≥ 0)`` for a bivariate normal ``N(m, C)``, in log space.
+
+    :math:`P = \int_{-m_1/s_1}^\infty φ(u)\,Φ\big((m_2 + ρ s_2 u)/(s_2\sqrt{1-ρ^2})\big)\,du`.
+    Gauss–Legendre on panels from the lower limit (or −13) to 13 standard
+    deviations above it (or above 0), split where the Φ factor steps (its
+    argument's zero), so that a correlation near ±1 is resolved.
+    """
+    s1, s2 = np.sqrt(C[0, 0]), np.sqrt(C[1, 1])
+    rho = float(np.clip(C[0, 1] / (s1 * s2), -1.0, 1.0))
+    r = np.sqrt(max(1.0 - rho**2, 1e-300))
+    lo = max(-m[0] / s1, -13.0)                    # φ below −13: < 1e-37 of the mass
+    hi = max(lo, 0.0) + 13.0
+    cuts = {lo, hi}
+    if rho != 0.0:
+        step = -m[1] / (rho * s2)
+        if lo < step < hi:
+            cuts.add(step)
+    cuts = np.array(sorted(cuts))
+    edges = np.concatenate([np.linspace(a, b, 5)[:-1] for a, b in zip(cuts[:-1], cuts[1:],
+                                                                    strict=True)] + [cuts[-1:]])
+    x, w = _GL
+    u = (edges[:-1, None] + np.diff(edges)[:, None] * x[None, :]).ravel()
+    lw = (np.log(np.diff(edges))[:, None] + np.log(w)[None, :]).ravel()
+    vals = (-0.5 * u**2 - 0.5 * np.log(2 * np.pi)
+            + special.log_ndtr((m[1] + rho * s2 * u) / (s2 * r)) + lw)
+    return float(special.logsumexp(vals))
+
+
 def _orthant_logp(m: np.ndarray, C: np.ndarray) -> float:
     """``log P(ζ ≥ 0)`` for ``ζ ~ N(m, C)`` (every component)."""
     if m.size == 0:
@@ -148,13 +235,7 @@ def _orthant_logp(m: np.ndarray, C: np.ndarray) -> float:
     if m.size == 1:
         return float(stats.norm.logcdf(m[0] / np.sqrt(C[0, 0])))
     if m.size == 2:
-        # ∫ φ(u) Φ((m₂ + ρ s₂ u)/(s₂√(1−ρ²))) du over u ≥ −m₁/s₁
-        s1, s2 = np.sqrt(C[0, 0]), np.sqrt(C[1, 1])
-        rho = C[0, 1] / (s1 * s2)
-        r = np.sqrt(max(1.0 - rho**2, 1e-300))
-        p, _ = integrate.quad(lambda u: stats.norm.pdf(u) * stats.norm.cdf(
-            (m[1] + rho * s2 * u) / (s2 * r)), -m[0] / s1, np.inf, epsabs=0, epsrel=1e-12,
-            limit=200)
+        return _orthant2(m, C)
     else:
         p = stats.multivariate_normal.cdf(np.zeros(m.size), mean=-m, cov=C, abseps=1e-10,
                                           releps=1e-8)
@@ -206,6 +287,20 @@ def log_bayes_factor(post: CoefficientPosterior, factor: float = 1.0) -> float:
     return float(special.logsumexp(lw + bf - b1) - special.logsumexp(lw - b1))
 
 
+def mixture_log_bf(post: CoefficientPosterior, scales: Sequence[float] = SCALES) -> float:
+    """:func:`log_bayes_factor` with the prior scale averaged over ``scales`` (equal weights)."""
+    return float(special.logsumexp([log_bayes_factor(post, f) for f in scales])
+                 - np.log(len(scales)))
+
+
+def mixture_shift(post: CoefficientPosterior | None) -> float:
+    """``log Z`` (scale mixture) − ``log Z`` (scale s) of a model, from its coefficients."""
+    if post is None:
+        return 0.0
+    thin = post.thinned              # a ratio of two averages over τ: few points suffice
+    return thin.mixture_log_bf - thin.log_bf
+
+
 def sensitivity(post: CoefficientPosterior, factors: Sequence[float] = BAND_FACTORS
                 ) -> dict[float, float]:
     """The change of :func:`log_bayes_factor` with every prior scale multiplied by each factor."""
@@ -229,6 +324,8 @@ def nested_log_z(log_z_p: float, singles: Sequence, pairs: Sequence
             (:class:`CoefficientPosterior` or ``None``), ``refined``, ``penalty``.
         pairs: Pair fits: ``name``, ``terms``, the same attributes.
 
+    Every evidence is that of the scale-free prior (module docstring, :func:`mixture_log_bf`).
+
     Returns:
         ``(log_z, how)``: the log evidence by model name, and for each
         ``"savage-dickey vs parameters"``, ``"savage-dickey vs <term>"`` or ``"laplace"``.
@@ -241,12 +338,12 @@ def nested_log_z(log_z_p: float, singles: Sequence, pairs: Sequence
     for f in singles:
         name = f.term.name
         if use_savage_dickey(f.coefficients, f.refined):
-            out[name] = log_z_p + log_bayes_factor(f.coefficients) - f.penalty
+            out[name] = log_z_p + f.coefficients.mixture_log_bf - f.penalty
             how[name] = "savage-dickey vs parameters"
         else:
-            out[name], how[name] = own(f), "laplace"
+            out[name], how[name] = own(f) + mixture_shift(f.coefficients), "laplace"
     for f in pairs:
-        out[f.name], how[f.name] = own(f), "laplace"
+        out[f.name], how[f.name] = own(f) + mixture_shift(f.coefficients), "laplace"
         base = sorted((k for k, t in enumerate(f.terms) if t.name in out),
                       key=lambda k: -out[f.terms[k].name])
         if not base or f.coefficients is None:
@@ -254,7 +351,7 @@ def nested_log_z(log_z_p: float, singles: Sequence, pairs: Sequence
         k = base[0]
         other = f.coefficients.sub([1 - k])
         if use_savage_dickey(other, f.refined):
-            out[f.name] = out[f.terms[k].name] + log_bayes_factor(other) - f.penalty
+            out[f.name] = out[f.terms[k].name] + other.mixture_log_bf - f.penalty
             how[f.name] = f"savage-dickey vs {f.terms[k].name}"
     return out, how
 

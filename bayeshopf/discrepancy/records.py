@@ -35,6 +35,7 @@ from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import UncertainParameter
 
 __all__ = ["KIND_NONE", "KIND_PARAMS", "KIND_TERM", "KIND_UNEXPLAINED", "OFF_LEVEL", "Z90",
+           "Unexplained",
            "CalibratedPairFit", "CalibratedTermFit", "Calibration", "CalibrationError",
            "CalibrationReport", "ModelError", "ParameterPosterior", "off_threshold",
            "posteriors"]
@@ -269,6 +270,37 @@ class CalibratedTermFit:
 
 
 @dataclass(frozen=True)
+class Unexplained:
+    """:math:`M_D`, the calibrated simulator with a smooth discrepancy.
+
+    The model and its evidence: :mod:`~bayeshopf.discrepancy.unexplained`.
+
+    Attributes:
+        log_z: Log evidence (common constants as every model's).
+        log_bf: Log Bayes factor against "parameters off" (:math:`M_P`).
+        eta_median: Posterior median of η, the discrepancy's relative size.
+        eta_ci90: Its 5% and 95% posterior quantiles.
+        ell_median: Posterior median of ℓ (units of the diagram coordinates).
+        eta_grid: The grid of η.
+        eta_weights: η's posterior weights on it.
+    """
+
+    log_z: float
+    log_bf: float
+    eta_median: float
+    eta_ci90: tuple[float, float]
+    ell_median: float
+    eta_grid: np.ndarray = field(repr=False)
+    eta_weights: np.ndarray = field(repr=False)
+
+    def to_json(self) -> dict:
+        """JSON-serialisable dict."""
+        return {"log_z": self.log_z, "log_bf_vs_parameters": self.log_bf,
+                "eta_median": self.eta_median, "eta_ci90": list(self.eta_ci90),
+                "ell_median": self.ell_median}
+
+
+@dataclass(frozen=True)
 class CalibrationReport:
     """Result of :func:`~bayeshopf.discrepancy.calibration.calibrate` (immutable).
 
@@ -279,12 +311,15 @@ class CalibrationReport:
             ``parameters`` (named off), ``terms`` (named missing), ``sentence``.
         log_z: Log evidence of ``"none"`` (nominal), ``"parameters"`` and each term.
         probabilities: Posterior probability of the same models.
-        class_probabilities: Of ``"none"``, ``"parameters off"``, ``"term missing"``.
+        class_probabilities: Of ``"none"``, ``"parameters off"``, ``"term missing"``
+            and ``"unexplained"``.
         chi2_nominal: Misfit with every parameter nominal.
         n_features: Features less sensor offsets (the degrees of freedom before any fit).
         calibration: The parameters calibrated with no term.
         terms: Each term with the parameters, most probable first.
         seconds: Wall time per stage.
+        unexplained: The model "unexplained" (the calibrated simulator with a
+            smooth discrepancy), or ``None`` where it was not compared.
     """
 
     system: str
@@ -299,6 +334,7 @@ class CalibrationReport:
     pairs: tuple[CalibratedPairFit, ...] = ()
     model_errors: Mapping[str, ModelError] = field(default_factory=dict)
     seconds: Mapping[str, float] = field(default_factory=dict)
+    unexplained: Unexplained | None = None
 
     def to_json(self) -> dict:
         """JSON-serialisable dict."""
@@ -333,6 +369,8 @@ class CalibrationReport:
                        "evidence": f.evidence, "log_evidence_laplace": f.log_z_laplace,
                        "parameters_off": [p.name for p in f.parameters if p.off]}
                       for f in self.pairs],
+            "unexplained": (self.unexplained.to_json() if self.unexplained is not None
+                            else None),
             "seconds": dict(self.seconds),
         }
 
@@ -348,6 +386,8 @@ class CalibrationReport:
                          + f"{100 * p.shift:+6.2f}%  {'yes' if p.off else ''}")
         lines += ["", "model                        probability   log Z"]
         rows = [("none (nominal)", "none"), ("parameters calibrated", "parameters")]
+        rows += [("unexplained (discrepancy)", "unexplained")] if "unexplained" in self.log_z \
+            else []
         rows += [(f.term.name, f.term.name) for f in self.terms[:5]]
         rows += [(f.name, f.name) for f in self.pairs[:2]]
         for label, k in rows:

@@ -1,15 +1,14 @@
 r"""The calibration's verdict: which class of model, what remains, in one paragraph.
 
-Of the three classes "nothing wrong" (:math:`M_0`), "parameters off"
-(:math:`M_P`) and "a term missing", the verdict is the most probable, with its
-most probable model. A **mismatch remains** when the 90% interval of the
-relative model error :math:`\tau` under that model lies above
-:data:`MIN_MODEL_ERROR` (a reporting threshold, not part of the evidence); it
-is located (:func:`located`: the recordings and channels that carry most of
-the misfit at that :math:`\tau`) and reported with the verdict. The verdict is
-``"unexplained"`` when a mismatch remains and the best model leaves more than
-:data:`EXPLAINED_FACTOR` of the nominal model error (or the best class is
-"nothing wrong"). Models within a factor
+Of the four classes "nothing wrong" (:math:`M_0`), "parameters off"
+(:math:`M_P`), "a term missing" and "unexplained" (:math:`M_D`: the calibrated
+simulator with a smooth discrepancy, :mod:`~bayeshopf.discrepancy.unexplained`),
+the verdict is the most probable, with its most probable model. A **mismatch
+remains** when the 90% interval of the relative model error :math:`\tau`
+under that model lies above :data:`MIN_MODEL_ERROR` (a reporting threshold,
+not part of the evidence); it is located (:func:`located`: the recordings and
+channels that carry most of the misfit at that :math:`\tau`) and reported
+with the verdict. Models within a factor
 :data:`~bayeshopf.discrepancy.select.TIE_FACTOR` of the best one in
 probability are named with it: the data cannot tell them apart
 (``verdict["indistinguishable"]``), whether they are two terms, a term and a
@@ -46,20 +45,19 @@ from bayeshopf.discrepancy.records import (
     Calibration,
     ModelError,
     ParameterPosterior,
+    Unexplained,
 )
 from bayeshopf.discrepancy.select import TIE_FACTOR, Fitter
 from bayeshopf.discrepancy.terms import Library
 from bayeshopf.simulators.base import System
 
-__all__ = ["EXPLAINED_FACTOR", "MIN_MODEL_ERROR", "band_words", "build_verdict", "located",
+__all__ = ["MIN_MODEL_ERROR", "band_words", "build_verdict", "located",
            "with_bayes_factors"]
 
 #: A model error whose 90% interval lies above this (0.1% of the amplitude) remains: a
 #: reporting threshold, not part of the evidence, above the agreement of the feature
 #: estimator and the shooting solver on exact-model simulated records.
 MIN_MODEL_ERROR = 1e-3
-#: A model explains a mismatch when it leaves at most this share of the nominal model error.
-EXPLAINED_FACTOR = 0.5
 
 
 def _pct(p: ParameterPosterior, lib: Library | None = None) -> str:
@@ -91,7 +89,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                   fits: Sequence[CalibratedTermFit], pair_fits: Sequence[CalibratedPairFit],
                   probs: Mapping[str, float], classes: Mapping[str, float],
                   best_class: str, best_model: str, me0: ModelError, me_best: ModelError,
-                  notes: Sequence[str]) -> dict:
+                  notes: Sequence[str], md: Unexplained | None = None) -> dict:
     """The report's ``verdict`` (module docstring).
 
     Args:
@@ -108,6 +106,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
         me0: Posterior of the model error with every parameter nominal.
         me_best: Under ``best_model``.
         notes: Notes of the preparation, appended to the sentence.
+        md: The model "unexplained", where compared.
 
     Returns:
         ``kind``, ``probability``, ``model``, ``parameters`` (named off),
@@ -117,7 +116,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
     # where the remaining misfit sits (residuals at the best model's mode)
     if best_model == "none":
         ob = fitter.base
-    elif best_model == "parameters":
+    elif best_model in ("parameters", "unexplained"):
         ob = cal.orbits
     else:
         ob = next(f.orbits for f in [*fits, *pair_fits]
@@ -125,11 +124,9 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                   or (isinstance(f, CalibratedTermFit) and f.term.name == best_model))
     e_best, ok_best = fitter.residuals(ob), ob.ok
     remains = bool(me_best.ci90[0] > MIN_MODEL_ERROR)
-    explained = me_best.median <= EXPLAINED_FACTOR * me0.median
     kind = best_class
-    if remains and (best_class == KIND_NONE or not explained):
-        kind = KIND_UNEXPLAINED
-    where = located(fitter, e_best, me_best.median, ok_best) if remains else []
+    where = (located(fitter, e_best, me_best.median, ok_best)
+             if remains or kind == KIND_UNEXPLAINED else [])
     # models the data cannot tell from the best one
     rivals = [k for k in sorted(probs, key=probs.get, reverse=True)
               if k != best_model and k != "none" and probs[k] * TIE_FACTOR >= probs[best_model]]
@@ -137,6 +134,8 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
     def model_words(k: str) -> str:
         if k == "parameters":
             return "a recalibration of the parameters alone"
+        if k == "unexplained":
+            return "a smooth discrepancy that no library term explains"
         return " together with ".join(lib[t].plain for t in k.split("+"))
 
     off = [p for p in cal.parameters if p.off]
@@ -185,13 +184,20 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                       else "")
                      + f". Model error {err(me0)} → {err(me_best)} of the orbit amplitude.")
     else:
-        best_words = (best_model if best_model in ("none", "parameters")
-                      else model_words(best_model))
-        sentence = ("The simulator and the recordings disagree beyond noise even after "
-                    f"calibration (model error {err(me0)} of the orbit amplitude nominal, "
-                    f"{err(me_best)} with the best model, {best_words})"
+        eta = ("" if md is None else f": a smooth discrepancy of the orbits' fundamentals of "
+               f"{100 * md.eta_median:.2g}% (90% {100 * md.eta_ci90[0]:.2g}–"
+               f"{100 * md.eta_ci90[1]:.2g}%) of their size over the diagram")
+        runner = max((k for k in probs if k not in ("none", "unexplained")), key=probs.get,
+                     default=None)
+        sentence = ("The simulator and the recordings disagree in a way that neither its "
+                    "parameters nor a library term explain" + eta
                     + (f", largest in {where[0]['channel']} at {where[0]['recording']}"
-                       if where else "") + ".")
+                       if where else "")
+                    + f" (model error {err(me0)} of the orbit amplitude nominal, "
+                    f"{err(cal.model_error)} calibrated)"
+                    + (f". The best explanation by the library, {model_words(runner)}, has "
+                       f"probability {probs[runner]:.2g}" if runner is not None else "")
+                    + ".")
     if rivals and kind in (KIND_PARAMS, KIND_TERM):
         sentence += (" The data cannot tell this from " + " or ".join(model_words(k)
                                                                   for k in rivals)

@@ -1,0 +1,193 @@
+r""""Unexplained" as a model: the calibrated simulator plus a smooth discrepancy.
+
+A mismatch that neither the parameters nor a library term account for is not
+the absence of a model; it is a model with its own evidence. :math:`M_D` is
+:math:`M_P` (the uncertain parameters calibrated, no term) plus a discrepancy
+:math:`\Delta` on the orbits' fundamentals, the same kind as the core's model
+discrepancy (:mod:`bayeshopf.model.discrepancy`, Kennedy & O'Hagan 2001):
+
+.. math::
+
+    y_{rj} = f_{rj}(\theta) + \Delta_j(x_r) + \varepsilon_{rj}, \qquad
+    \operatorname{Cov}\big(\Delta_j(x_r), \Delta_j(x_{r'})\big)
+        = \eta^2\,\mathrm{ref}_{rj}\,\mathrm{ref}_{r'j}\,
+          e^{-\lVert x_r - x_{r'}\rVert^2 / 2\ell^2},
+
+independent between the features :math:`j` of the fundamental (each channel's
+first-harmonic coefficients) and the frequency, zero on the other features.
+:math:`\mathrm{ref}` is the scale of the relative model error τ
+(:class:`~bayeshopf.discrepancy.select.Fitter`: the channel's first-harmonic
+magnitude; a tenth of the frequency for the frequency), so :math:`\eta` is a
+relative error of the fundamental that varies smoothly over the diagram, where
+:math:`x_r = (\tilde\mu_r, s_r^2/\overline{s^2})`: :math:`\tilde\mu = (\mu -
+\mu_c)/\Delta\mu` and :math:`s_r` the first channel's first-harmonic magnitude
+(orbits on both sides of a fold that are nearly the same orbit share their
+discrepancy; a stable and an unstable orbit at one μ need not). Priors as the
+core's: :math:`\eta \sim \mathrm{HalfNormal}` (:data:`ETA_PRIOR`),
+:math:`\ell \sim \mathrm{LogNormal}` (:data:`LENGTH_PRIOR`), τ log-uniform as
+in every model.
+
+**Evidence.** :math:`\Delta` is Gaussian and linear, so it is integrated out
+exactly: at each :math:`(\tau, \eta, \ell)` the rows of each smooth feature
+(found orbits only) are whitened by the Cholesky factor of
+:math:`I + \eta^2 W K W`, :math:`W = \mathrm{diag}(\mathrm{ref}/\sigma(\tau))`,
+and the Laplace evidence of the parameters is taken on the linear model at
+:math:`M_P`'s mode (:mod:`~bayeshopf.discrepancy.evidence`). The hyperparameters
+are integrated on grids of their priors' quantiles (equal weights) and τ on
+every :data:`TAU_STRIDE`-th point of :data:`~bayeshopf.discrepancy.evidence.TAU`.
+The Bayes factor against :math:`M_P` is formed between the two linear models on
+the same grids, and added to :math:`M_P`'s evidence, so that :math:`M_D` pays
+the same linearisation charge as :math:`M_P` and equals it at :math:`\eta = 0`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import linalg, stats
+
+from bayeshopf.discrepancy.evidence import TAU, _rewhiten, laplace_evidence
+from bayeshopf.discrepancy.records import Calibration, Unexplained
+from bayeshopf.discrepancy.select import Fitter
+from bayeshopf.model.discrepancy import ETA_PRIOR, LENGTH_PRIOR
+
+__all__ = ["ETA_PRIOR", "LENGTH_PRIOR", "N_ELL", "N_ETA", "TAU_STRIDE", "Unexplained",
+           "diagram_inputs", "evidence_grid", "evidence_with_discrepancy", "smooth_columns",
+           "unexplained"]
+
+#: Quantiles of η's prior on its grid.
+N_ETA = 24
+#: Quantiles of ℓ's prior on its grid.
+N_ELL = 5
+#: τ on every this-th point of ``TAU``.
+TAU_STRIDE = 5
+
+
+def smooth_columns(fitter: Fitter) -> list[int]:
+    """The features that carry the smooth discrepancy: fundamentals and the frequency."""
+    lay = fitter.mf.layout
+    return [j for j, (k, h) in enumerate(zip(lay.kind, lay.harmonic, strict=True))
+            if k == "f" or (k == "harm" and h == 1)]
+
+
+def diagram_inputs(fitter: Fitter) -> np.ndarray:
+    r"""``x_r = (μ̃_r, s_r²/mean s²)``, shape ``(R, 2)`` (module docstring)."""
+    mf = fitter.mf
+    mu = np.asarray(mf.mu, dtype=float)
+    span = float(mu.max() - mu.min()) or 1.0
+    mu_t = (mu - 0.5 * (mu.max() + mu.min())) / span
+    lab = mf.layout.labels
+    c = mf.layout.channels[0]
+    s2 = mf.y[:, lab.index(f"{c}:Re1")] ** 2
+    if f"{c}:Im1" in lab:
+        s2 = s2 + mf.y[:, lab.index(f"{c}:Im1")] ** 2
+    return np.stack([mu_t, s2 / max(float(np.mean(s2)), 1e-300)], axis=1)
+
+
+def _quantiles(dist, n: int) -> np.ndarray:
+    return dist.ppf((np.arange(n) + 0.5) / n)
+
+
+def _logmeanexp(a: np.ndarray) -> float:
+    m = float(np.max(a))
+    return m + float(np.log(np.mean(np.exp(a - m))))
+
+
+def evidence_with_discrepancy(E: np.ndarray, G: np.ndarray, rows: dict[int, np.ndarray],
+                              W: dict[int, np.ndarray], eta: float, K: np.ndarray) -> float:
+    r"""Laplace log evidence of :math:`E + G\delta` with the discrepancy on ``rows`` integrated out.
+
+    Each feature ``j``'s rows ``rows[j]`` of the whitened residuals get the
+    covariance :math:`C_j = I + \eta^2 (w_j w_j^\top) \circ K` (``w_j = W[j]``,
+    the discrepancy's scale over the noise); they are whitened by the Cholesky
+    factor :math:`L_j` of :math:`C_j`, and :math:`-\sum \log\operatorname{diag} L_j`
+    is added (:func:`~bayeshopf.discrepancy.evidence.laplace_evidence` for the rest).
+    """
+    E2, G2, extra = E.copy(), G.copy(), 0.0
+    for j, r in rows.items():
+        w = W[j]
+        L = linalg.cholesky(np.eye(r.size) + eta**2 * np.outer(w, w) * K, lower=True)
+        E2[r] = linalg.solve_triangular(L, E[r], lower=True)
+        G2[r] = linalg.solve_triangular(L, G[r], lower=True)
+        extra -= float(np.sum(np.log(np.diag(L))))
+    return laplace_evidence(E2, G2)[0] + extra
+
+
+def evidence_grid(E: np.ndarray, G: np.ndarray, rows: dict[int, np.ndarray],
+                  W: dict[int, np.ndarray], etas: np.ndarray, kernels: np.ndarray
+                  ) -> np.ndarray:
+    r""":func:`evidence_with_discrepancy` at every ``(η, kernel)``, ``(len(etas), len(kernels))``.
+
+    The same algebra batched: the rows off the discrepancy enter
+    :math:`H = G^\top G`, :math:`b = G^\top E` and :math:`\lVert E\rVert^2` once; each
+    feature's rows add their whitened parts.
+    """
+    gp = np.concatenate(list(rows.values())) if rows else np.zeros(0, int)
+    rest = np.setdiff1d(np.arange(E.size), gp)
+    H = np.broadcast_to(G[rest].T @ G[rest], (len(etas), len(kernels)) + (G.shape[1],) * 2
+                        ).copy()
+    b = np.broadcast_to(G[rest].T @ E[rest], (len(etas), len(kernels), G.shape[1])).copy()
+    ee = np.full((len(etas), len(kernels)), float(E[rest] @ E[rest]))
+    logdet_c = np.zeros((len(etas), len(kernels)))
+    K = np.asarray(kernels)
+    e2 = np.asarray(etas, float)[:, None, None, None] ** 2
+    for j, r in rows.items():
+        w = W[j]
+        C = np.eye(r.size) + e2 * (np.outer(w, w) * K)[None]       # (η, ℓ, n, n)
+        L = np.linalg.cholesky(C)
+        rhs = np.concatenate([E[r][:, None], G[r]], axis=1)          # (n, 1 + d)
+        Z = np.linalg.solve(L, np.broadcast_to(rhs, L.shape[:2] + rhs.shape))
+        ze, zg = Z[..., 0], Z[..., 1:]
+        H += np.einsum("...na,...nb->...ab", zg, zg)
+        b += np.einsum("...na,...n->...a", zg, ze)
+        ee += np.einsum("...n,...n->...", ze, ze)
+        logdet_c += np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
+    sol = np.linalg.solve(H, b[..., None])[..., 0]
+    logdet_h = np.linalg.slogdet(H)[1]
+    return -0.5 * (ee - np.einsum("...a,...a->...", b, sol)) - 0.5 * logdet_h - logdet_c
+
+
+def unexplained(cal: Calibration) -> Unexplained:
+    """:math:`M_D` at the calibration ``cal`` (:math:`M_P`'s mode): evidence and η's posterior.
+
+    Args:
+        cal: The parameters calibrated with no term (its ``fitter``, mode,
+            residuals, Jacobian and orbits).
+
+    Returns:
+        An :class:`Unexplained`.
+    """
+    fitter: Fitter = cal.fitter
+    R, P = fitter.mf.y.shape
+    ok = np.asarray(cal.orbits.ok, bool)
+    d = cal.z_mode.size
+    E = np.concatenate([np.asarray(cal.e_mode).ravel(), cal.z_mode])
+    G = np.concatenate([np.asarray(cal.jac), np.eye(d)])
+    X = diagram_inputs(fitter)[ok]
+    d2 = np.sum((X[:, None, :] - X[None, :, :]) ** 2, axis=-1)
+    etas = _quantiles(stats.halfnorm(scale=ETA_PRIOR), N_ETA)
+    ells = _quantiles(stats.lognorm(s=LENGTH_PRIOR[1], scale=LENGTH_PRIOR[0]), N_ELL)
+    kernels = np.array([np.exp(-d2 / (2.0 * ell**2)) for ell in ells])
+    cols = smooth_columns(fitter)
+    found = np.nonzero(ok)[0]
+    rows = {j: found * P + j for j in cols}
+    taus = TAU[::TAU_STRIDE]
+    lz = np.empty((taus.size, N_ETA, N_ELL))
+    lz0 = np.empty(taus.size)
+    for a, tau in enumerate(taus):
+        Et, Gt, ln = _rewhiten(fitter, E, G, ok, float(tau))
+        lz0[a] = laplace_evidence(Et, Gt)[0] + ln
+        s1 = fitter.sigma_at(float(tau))
+        W = {j: fitter.ref[found, j] / s1[found, j] for j in cols}
+        lz[a] = evidence_grid(Et, Gt, rows, W, etas, kernels) + ln
+    log_bf = _logmeanexp(lz) - _logmeanexp(lz0)
+    w = np.exp(lz - lz.max())
+    w_eta = w.sum(axis=(0, 2))
+    w_eta /= w_eta.sum()
+    w_ell = w.sum(axis=(0, 1))
+    w_ell /= w_ell.sum()
+    cdf = np.cumsum(w_eta) - 0.5 * w_eta
+    q = np.interp([0.05, 0.5, 0.95], cdf, etas)
+    ell_med = float(np.interp(0.5, np.cumsum(w_ell) - 0.5 * w_ell, ells))
+    return Unexplained(log_z=float(cal.log_z + log_bf), log_bf=float(log_bf),
+                       eta_median=float(q[1]), eta_ci90=(float(q[0]), float(q[2])),
+                       ell_median=ell_med, eta_grid=etas, eta_weights=w_eta)
