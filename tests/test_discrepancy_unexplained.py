@@ -113,7 +113,7 @@ def _calibration(fitter, e, J):
                        fitter=fitter)
 
 
-@pytest.mark.parametrize("eta_true", [0.0, 0.03])
+@pytest.mark.parametrize("eta_true", [0.0, 0.03, 0.2])   # 0.2: four prior scales out
 def test_a_smooth_misfit_the_parameters_cannot_take_is_unexplained(fitter, eta_true):
     """Residuals: white noise, plus (η_true > 0) a smooth relative error of the fundamentals
     over the diagram, drawn here; two parameters whose columns are random."""

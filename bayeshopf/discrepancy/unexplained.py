@@ -33,8 +33,10 @@ exactly: at each :math:`(\tau, \eta, \ell)` the rows of each smooth feature
 :math:`I + \eta^2 W K W`, :math:`W = \mathrm{diag}(\mathrm{ref}/\sigma(\tau))`,
 and the Laplace evidence of the parameters is taken on the linear model at
 :math:`M_P`'s mode (:mod:`~bayeshopf.discrepancy.evidence`). The hyperparameters
-are integrated on grids of their priors' quantiles (equal weights) and τ on
-every :data:`TAU_STRIDE`-th point of :data:`~bayeshopf.discrepancy.evidence.TAU`.
+are integrated on geometric grids (:data:`ETA_RANGE`, :data:`ELL_RANGE`), each
+point weighted by its cell's prior mass (the end cells reach to the prior's
+ends), and τ on every :data:`TAU_STRIDE`-th point of
+:data:`~bayeshopf.discrepancy.evidence.TAU`.
 The Bayes factor against :math:`M_P` is formed between the two linear models on
 the same grids, and added to :math:`M_P`'s evidence, so that :math:`M_D` pays
 the same linearisation charge as :math:`M_P` and equals it at :math:`\eta = 0`.
@@ -43,21 +45,27 @@ the same linearisation charge as :math:`M_P` and equals it at :math:`\eta = 0`.
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg, special, stats
 
 from bayeshopf.discrepancy.evidence import TAU, _rewhiten, laplace_evidence
 from bayeshopf.discrepancy.records import Calibration, Unexplained
 from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.model.discrepancy import ETA_PRIOR, LENGTH_PRIOR
 
-__all__ = ["ETA_PRIOR", "LENGTH_PRIOR", "N_ELL", "N_ETA", "TAU_STRIDE", "Unexplained",
+__all__ = ["ELL_RANGE", "ETA_PRIOR", "ETA_RANGE", "LENGTH_PRIOR", "N_ELL", "N_ETA",
+           "TAU_STRIDE", "Unexplained",
            "diagram_inputs", "evidence_grid", "evidence_with_discrepancy", "smooth_columns",
            "unexplained"]
 
-#: Quantiles of η's prior on its grid.
-N_ETA = 24
-#: Quantiles of ℓ's prior on its grid.
-N_ELL = 5
+#: Points of η's grid, geometric over :data:`ETA_RANGE`.
+N_ETA = 40
+#: η's grid range: from where the discrepancy is M_P's to ten prior scales.
+ETA_RANGE = (1e-4, 10 * ETA_PRIOR)
+#: Points of ℓ's grid, geometric over :data:`ELL_RANGE`.
+N_ELL = 9
+#: ℓ's grid range: the prior's median times e^(±3.2 log-sd) (99.9% of its mass).
+ELL_RANGE = (LENGTH_PRIOR[0] * np.exp(-3.2 * LENGTH_PRIOR[1]),
+             LENGTH_PRIOR[0] * np.exp(3.2 * LENGTH_PRIOR[1]))
 #: τ on every this-th point of ``TAU``.
 TAU_STRIDE = 5
 
@@ -83,8 +91,18 @@ def diagram_inputs(fitter: Fitter) -> np.ndarray:
     return np.stack([mu_t, s2 / max(float(np.mean(s2)), 1e-300)], axis=1)
 
 
-def _quantiles(dist, n: int) -> np.ndarray:
-    return dist.ppf((np.arange(n) + 0.5) / n)
+def _grid(dist, lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A geometric grid on ``[lo, hi]`` and its prior weights (the prior's mass in each cell).
+
+    Cells end at the geometric midpoints; the first reaches down to the
+    distribution's lower end and the last up to its upper end, so the weights
+    sum to 1 and a posterior that piles at an end of the grid is not cut off
+    by the grid's placement.
+    """
+    g = np.geomspace(lo, hi, n)
+    mid = np.sqrt(g[1:] * g[:-1])
+    cdf = np.concatenate([[0.0], dist.cdf(mid), [1.0]])
+    return g, np.diff(cdf)
 
 
 def _logmeanexp(a: np.ndarray) -> float:
@@ -164,8 +182,9 @@ def unexplained(cal: Calibration) -> Unexplained:
     G = np.concatenate([np.asarray(cal.jac), np.eye(d)])
     X = diagram_inputs(fitter)[ok]
     d2 = np.sum((X[:, None, :] - X[None, :, :]) ** 2, axis=-1)
-    etas = _quantiles(stats.halfnorm(scale=ETA_PRIOR), N_ETA)
-    ells = _quantiles(stats.lognorm(s=LENGTH_PRIOR[1], scale=LENGTH_PRIOR[0]), N_ELL)
+    etas, p_eta = _grid(stats.halfnorm(scale=ETA_PRIOR), *ETA_RANGE, N_ETA)
+    ells, p_ell = _grid(stats.lognorm(s=LENGTH_PRIOR[1], scale=LENGTH_PRIOR[0]), *ELL_RANGE,
+                        N_ELL)
     kernels = np.array([np.exp(-d2 / (2.0 * ell**2)) for ell in ells])
     cols = smooth_columns(fitter)
     found = np.nonzero(ok)[0]
@@ -179,15 +198,18 @@ def unexplained(cal: Calibration) -> Unexplained:
         s1 = fitter.sigma_at(float(tau))
         W = {j: fitter.ref[found, j] / s1[found, j] for j in cols}
         lz[a] = evidence_grid(Et, Gt, rows, W, etas, kernels) + ln
-    log_bf = _logmeanexp(lz) - _logmeanexp(lz0)
-    w = np.exp(lz - lz.max())
+    # τ's grid points have equal prior weight; η's and ℓ's carry their cells' prior mass
+    lw = (np.log(np.maximum(p_eta, 1e-300))[None, :, None]
+          + np.log(np.maximum(p_ell, 1e-300))[None, None, :])
+    log_bf = _logmeanexp(special.logsumexp(lz + lw, axis=(1, 2))) - _logmeanexp(lz0)
+    w = np.exp(lz + lw - (lz + lw).max())
     w_eta = w.sum(axis=(0, 2))
     w_eta /= w_eta.sum()
     w_ell = w.sum(axis=(0, 1))
     w_ell /= w_ell.sum()
     cdf = np.cumsum(w_eta) - 0.5 * w_eta
-    q = np.interp([0.05, 0.5, 0.95], cdf, etas)
-    ell_med = float(np.interp(0.5, np.cumsum(w_ell) - 0.5 * w_ell, ells))
+    q = np.exp(np.interp([0.05, 0.5, 0.95], cdf, np.log(etas)))
+    ell_med = float(np.exp(np.interp(0.5, np.cumsum(w_ell) - 0.5 * w_ell, np.log(ells))))
     return Unexplained(log_z=float(cal.log_z + log_bf), log_bf=float(log_bf),
                        eta_median=float(q[1]), eta_ci90=(float(q[0]), float(q[2])),
                        ell_median=ell_med, eta_grid=etas, eta_weights=w_eta)
