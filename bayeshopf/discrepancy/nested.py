@@ -59,7 +59,9 @@ therefore the scale mixture :math:`c \mid f \sim \mathcal N(0, f^2 s^2)`,
 coefficient bounded at 0), and every term model's evidence is averaged over
 :math:`f` on :data:`N_SCALES` quantile points:
 :math:`Z_k = \overline{Z_k(f)}`, each :math:`Z_k(f)/Z_k(1)` from the Gaussian
-algebra below ("Sensitivity"), exact for residuals linear in the unknowns. A
+algebra below ("Sensitivity"), exact for residuals linear in the unknowns (a
+model that keeps its own Laplace evidence takes the ratio of the averages on
+the few τ that hold 99.9% of its weight, :attr:`CoefficientPosterior.thinned`). A
 term the data resolve at a few standard deviations no longer pays the Occam
 factor of a gross-error prior; a term of no effect costs little (its small
 scales are indistinguishable from :math:`M_P`), and one the data exclude still
@@ -101,8 +103,7 @@ from scipy import special, stats
 __all__ = ["BAND_FACTORS", "N_SCALES", "SCALES", "SCALE_RANGE", "SD_RANGE",
            "CoefficientPosterior", "class_bayes_factors", "gaussian_log_bf",
            "gaussian_marginal", "log_bayes_factor", "mixture_log_bf", "mixture_shift",
-           "nested_log_z",
-           "sensitivity", "use_savage_dickey"]
+           "nested_log_z", "sensitivity", "use_savage_dickey"]
 
 #: Savage–Dickey is used when 0 lies within this many posterior standard deviations.
 SD_RANGE = 4.0
@@ -195,8 +196,8 @@ def gaussian_marginal(E: np.ndarray, G: np.ndarray, x: np.ndarray, k: int
 
 
 #: Gauss–Legendre nodes and weights on [0, 1] of each panel of :func:`_orthant2`.
-_GL = tuple((x + 1) / 2 for x in np.polynomial.legendre.leggauss(32)[:1]) + (
-    np.polynomial.legendre.leggauss(32)[1] / 2,)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(32)
+_GL = ((_GL_X + 1.0) / 2.0, _GL_W / 2.0)
 
 
 def _orthant2(m: np.ndarray, C: np.ndarray) -> float:
