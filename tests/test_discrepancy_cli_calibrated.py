@@ -156,6 +156,10 @@ def test_cli_reports_bayes_factors_apart_from_the_prior_odds(cli_run):
                 assert odds == pytest.approx(np.log(cp[c] / cp[o]), abs=1e-6)
                 checked += 1
     assert checked >= 1
+    # the verdict's own model's probability, beside its class's
+    model = next(m for m in d["models"] if m["name"] == v["model"])
+    assert v["model_probability"] == pytest.approx(model["probability"])
+    assert v["model_probability"] <= v["probability"] + 1e-12
     band = v["prior_sensitivity"]
     assert band and set(band[0]["scales"]) == {"0.5", "2.0"}
     md = (out / "report.md").read_text()

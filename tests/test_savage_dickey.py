@@ -290,3 +290,18 @@ def test_the_verdict_says_when_the_prior_scales_decide(scales, decided):
     assert "none" not in v["bayes_factors"]["log_bayes_factor"]["none"]
     md = "\n".join(_bayes_markdown(v))
     assert "| term missing | 0.2 | 7.0 | 2.0 |" in md and "| none | 0.4 | – | -5.0 |" in md
+
+
+def test_an_unexplained_verdict_gives_the_discrepancys_bayes_factor():
+    lb = {"none": {"parameters off": -5.0, "unexplained": -9.0, "term missing": -7.0},
+          "parameters off": {"none": 5.0, "unexplained": -4.0, "term missing": -2.0},
+          "unexplained": {"none": 9.0, "parameters off": 4.0, "term missing": 2.0},
+          "term missing": {"none": 7.0, "parameters off": 2.0, "unexplained": -2.0}}
+    bayes = {"prior": {"none": 0.3, "parameters off": 0.3, "unexplained": 0.3,
+                       "term missing": 0.1}, "log_evidence": {}, "log_bayes_factor": lb}
+    v = with_bayes_factors({"kind": "unexplained", "model": "unexplained", "sentence": "S."},
+                           bayes, [])
+    assert v["sentence"] == ("S. Apart from the prior odds, the log Bayes factor of the smooth "
+                             "discrepancy against parameters off is 4.0, of a missing term 2.0.")
+    assert v["bayes_factors"]["log_bayes_factor"]["unexplained"] == {"none": 9.0,
+                                                                      "parameters off": 4.0}

@@ -109,7 +109,8 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
         md: The model "unexplained", where compared.
 
     Returns:
-        ``kind``, ``probability``, ``model``, ``parameters`` (named off),
+        ``kind``, ``probability`` (of the class), ``model``, ``model_probability``
+        (of that model alone: the class's shared with its rivals), ``parameters`` (named off),
         ``terms`` (named missing), ``pair``, ``indistinguishable``,
         ``model_error``, ``remaining`` and ``sentence``.
     """
@@ -207,6 +208,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
     if notes:
         sentence += " Note: " + " ".join(notes)
     return {"kind": kind, "probability": classes[best_class], "model": best_model,
+            "model_probability": float(probs.get(best_model, classes[best_class])),
             "parameters": [p.name for p in off] if kind in (KIND_PARAMS, KIND_TERM) else [],
             "terms": named_terms, "pair": len(named_terms) == 2,
             "equivalent_terms": {p.name: t.name for p in off for t, par in lib.duplicates
@@ -248,6 +250,13 @@ def with_bayes_factors(verdict: Mapping, bayes: Mapping, bands: Sequence[Mapping
         "log_bayes_factor": {c: {o: lb[c][o] for o in (KIND_NONE, KIND_PARAMS) if o in lb[c]}
                              for c in lb}}
     v["prior_sensitivity"] = [dict(b) for b in bands]
+    if v["kind"] == KIND_UNEXPLAINED and KIND_UNEXPLAINED in lb and KIND_PARAMS in lb:
+        v["sentence"] = v["sentence"] + (
+            f" Apart from the prior odds, the log Bayes factor of the smooth discrepancy "
+            f"against parameters off is {lb[KIND_UNEXPLAINED][KIND_PARAMS]:.1f}"
+            + (f", of a missing term {lb[KIND_TERM][KIND_PARAMS]:.1f}"
+               if KIND_TERM in lb else "") + ".")
+        return v
     if KIND_TERM not in lb or KIND_PARAMS not in lb:
         return v
     words = (f" Apart from the prior odds ({bayes['prior'][KIND_TERM]:.2g} against "
