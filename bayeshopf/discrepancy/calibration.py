@@ -511,7 +511,7 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
     cal, compromise = _calibrate_parameters(fitter, unc, dof0, max_nfev)
     fitter = cal.fitter
     secs["calibrate"] = time.perf_counter() - t1
-    md = unexplained(cal)
+    md, md_cal = unexplained(cal), cal
     log_z = {"none": me0.log_z, "parameters": cal.log_z, "unexplained": md.log_z}
     errors = {"none": me0, "parameters": cal.model_error, "unexplained": cal.model_error}
     n = len(lib.terms)
@@ -556,7 +556,8 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
                                        max_nfev)
     # a refit of the best model (or of M_P) moves the evidences nested on it
     log_z["parameters"], errors["parameters"] = cal.log_z, cal.model_error
-    md = unexplained(cal)
+    if cal is not md_cal:                                  # M_D sits on M_P's mode
+        md = unexplained(cal)
     log_z["unexplained"], errors["unexplained"] = md.log_z, cal.model_error
     fits, pair_fits = _nest(log_z["parameters"], fits, pair_fits)
     for f in fits:

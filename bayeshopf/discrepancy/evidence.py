@@ -186,8 +186,10 @@ def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
 
     Returns the :class:`ModelError` and the log evidence at each τ.
     """
-    lz = np.array([evidence(Et, Gt) + ln - (penalty(t, Et, Gt) if penalty else 0.0)
-                   for t, (Et, Gt, ln) in ((t, _rewhiten(fitter, E, G, ok, t)) for t in TAU)])
+    lz = np.empty(TAU.size)
+    for i, t in enumerate(TAU):
+        Et, Gt, ln = _rewhiten(fitter, E, G, ok, t)
+        lz[i] = evidence(Et, Gt) + ln - (penalty(t, Et, Gt) if penalty else 0.0)
     mx = lz.max()
     w = np.exp(lz - mx)
     w /= w.sum()

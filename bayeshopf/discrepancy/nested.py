@@ -278,20 +278,29 @@ def log_bayes_factor(post: CoefficientPosterior, factor: float = 1.0) -> float:
             set to 0 in the nested model: :meth:`CoefficientPosterior.sub`).
         factor: Every coefficient's prior scale multiplied by this.
     """
+    return float(_log_bayes_factors(post, (factor,))[0])
+
+
+def _log_bayes_factors(post: CoefficientPosterior, factors: Sequence[float]) -> np.ndarray:
+    """:func:`log_bayes_factor` at each of ``factors``, the ratios at scale 1 formed once."""
     lw = np.log(np.clip(post.weights, 1e-300, None))
     b1 = np.array([gaussian_log_bf(m, C, post.positive)
                    for m, C in zip(post.mean, post.cov, strict=True)])
-    if factor == 1.0:
-        return float(-special.logsumexp(lw - b1))
-    bf = np.array([gaussian_log_bf(m, C, post.positive, factor)
-                   for m, C in zip(post.mean, post.cov, strict=True)])
-    return float(special.logsumexp(lw + bf - b1) - special.logsumexp(lw - b1))
+    base = special.logsumexp(lw - b1)
+    out = []
+    for f in factors:
+        if f == 1.0:
+            out.append(-base)
+            continue
+        bf = np.array([gaussian_log_bf(m, C, post.positive, f)
+                       for m, C in zip(post.mean, post.cov, strict=True)])
+        out.append(special.logsumexp(lw + bf - b1) - base)
+    return np.array(out, dtype=float)
 
 
 def mixture_log_bf(post: CoefficientPosterior, scales: Sequence[float] = SCALES) -> float:
     """:func:`log_bayes_factor` with the prior scale averaged over ``scales`` (equal weights)."""
-    return float(special.logsumexp([log_bayes_factor(post, f) for f in scales])
-                 - np.log(len(scales)))
+    return float(special.logsumexp(_log_bayes_factors(post, scales)) - np.log(len(scales)))
 
 
 def mixture_shift(post: CoefficientPosterior | None) -> float:

@@ -45,17 +45,16 @@ the same linearisation charge as :math:`M_P` and equals it at :math:`\eta = 0`.
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg, special, stats
+from scipy import special, stats
 
 from bayeshopf.discrepancy.evidence import TAU, _rewhiten, laplace_evidence
 from bayeshopf.discrepancy.records import Calibration, Unexplained
 from bayeshopf.discrepancy.select import Fitter
-from bayeshopf.model.discrepancy import ETA_PRIOR, LENGTH_PRIOR
+from bayeshopf.model.discrepancy import ETA_PRIOR, LENGTH_PRIOR, coordinate
 
 __all__ = ["ELL_RANGE", "ETA_PRIOR", "ETA_RANGE", "LENGTH_PRIOR", "N_ELL", "N_ETA",
            "TAU_STRIDE", "Unexplained",
-           "diagram_inputs", "evidence_grid", "evidence_with_discrepancy", "smooth_columns",
-           "unexplained"]
+           "diagram_inputs", "evidence_grid", "smooth_columns", "unexplained"]
 
 #: Points of η's grid, geometric over :data:`ETA_RANGE`.
 N_ETA = 40
@@ -88,7 +87,8 @@ def diagram_inputs(fitter: Fitter) -> np.ndarray:
     s2 = mf.y[:, lab.index(f"{c}:Re1")] ** 2
     if f"{c}:Im1" in lab:
         s2 = s2 + mf.y[:, lab.index(f"{c}:Im1")] ** 2
-    return np.stack([mu_t, s2 / max(float(np.mean(s2)), 1e-300)], axis=1)
+    s = np.sqrt(s2)
+    return np.asarray(coordinate(mu_t, s, s))
 
 
 def _grid(dist, lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -110,34 +110,19 @@ def _logmeanexp(a: np.ndarray) -> float:
     return m + float(np.log(np.mean(np.exp(a - m))))
 
 
-def evidence_with_discrepancy(E: np.ndarray, G: np.ndarray, rows: dict[int, np.ndarray],
-                              W: dict[int, np.ndarray], eta: float, K: np.ndarray) -> float:
-    r"""Laplace log evidence of :math:`E + G\delta` with the discrepancy on ``rows`` integrated out.
-
-    Each feature ``j``'s rows ``rows[j]`` of the whitened residuals get the
-    covariance :math:`C_j = I + \eta^2 (w_j w_j^\top) \circ K` (``w_j = W[j]``,
-    the discrepancy's scale over the noise); they are whitened by the Cholesky
-    factor :math:`L_j` of :math:`C_j`, and :math:`-\sum \log\operatorname{diag} L_j`
-    is added (:func:`~bayeshopf.discrepancy.evidence.laplace_evidence` for the rest).
-    """
-    E2, G2, extra = E.copy(), G.copy(), 0.0
-    for j, r in rows.items():
-        w = W[j]
-        L = linalg.cholesky(np.eye(r.size) + eta**2 * np.outer(w, w) * K, lower=True)
-        E2[r] = linalg.solve_triangular(L, E[r], lower=True)
-        G2[r] = linalg.solve_triangular(L, G[r], lower=True)
-        extra -= float(np.sum(np.log(np.diag(L))))
-    return laplace_evidence(E2, G2)[0] + extra
-
-
 def evidence_grid(E: np.ndarray, G: np.ndarray, rows: dict[int, np.ndarray],
                   W: dict[int, np.ndarray], etas: np.ndarray, kernels: np.ndarray
                   ) -> np.ndarray:
-    r""":func:`evidence_with_discrepancy` at every ``(η, kernel)``, ``(len(etas), len(kernels))``.
+    r"""Laplace log evidence of :math:`E + G\delta` with the discrepancy integrated out.
 
-    The same algebra batched: the rows off the discrepancy enter
-    :math:`H = G^\top G`, :math:`b = G^\top E` and :math:`\lVert E\rVert^2` once; each
-    feature's rows add their whitened parts.
+    At every ``(η, kernel K)``, shape ``(len(etas), len(kernels))``: each
+    feature ``j``'s rows ``rows[j]`` of the whitened residuals get the
+    covariance :math:`C_j = I + \eta^2 (w_j w_j^\top) \circ K` (``w_j = W[j]``,
+    the discrepancy's scale over the noise); they are whitened by the Cholesky
+    factor :math:`L_j` of :math:`C_j`, and :math:`-\sum \log\operatorname{diag} L_j`
+    is added (:func:`~bayeshopf.discrepancy.evidence.laplace_evidence` for the
+    rest). The rows off the discrepancy enter :math:`H = G^\top G`,
+    :math:`b = G^\top E` and :math:`\lVert E\rVert^2` once.
     """
     gp = np.concatenate(list(rows.values())) if rows else np.zeros(0, int)
     rest = np.setdiff1d(np.arange(E.size), gp)
@@ -175,7 +160,7 @@ def unexplained(cal: Calibration) -> Unexplained:
         An :class:`Unexplained`.
     """
     fitter: Fitter = cal.fitter
-    R, P = fitter.mf.y.shape
+    P = fitter.mf.y.shape[1]
     ok = np.asarray(cal.orbits.ok, bool)
     d = cal.z_mode.size
     E = np.concatenate([np.asarray(cal.e_mode).ravel(), cal.z_mode])
