@@ -358,16 +358,19 @@ def test_stored_notebook_is_a_full_run_whose_numbers_are_the_docs():
     readme = (REPO / "docs" / "limits.md").read_text()
     text = run.text
     # the blind run's hybrid fit, quoted in the limits
-    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.143 " \
-           "[13.995, 14.252]" in text
-    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.143 [13.995, 14.252] m/s" in \
+    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.144 " \
+           "[13.985, 14.252]" in text
+    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.144 [13.985, 14.252] m/s" in \
         " ".join(readme.split())
-    # the rig: the hybrid fit's fold (with the control term) as the limits give it, the
-    # calibrated fold
-    assert "fold 14.258 [13.810, 14.523]" in text and "14.26 [13.81, 14.52] m/s with it, as " \
+    # the rig: the hybrid fit's fold (with the control term) as the limits give it; the
+    # verdict and the calibrated simulator's fold
+    assert "fold 14.256 [13.792, 14.513]" in text and "14.26 [13.79, 14.51] m/s with it, as " \
         "notebook 04's stored run has it" in " ".join(readme.split())
-    assert "after      Hopf 17.929 m/s, fold 15.342 m/s" in text
-    assert "its fold moves to 15.3 m/s" in " ".join(readme.split())
+    assert "neither its parameters nor a library term explain: a smooth discrepancy of the " \
+           "orbits' fundamentals of 26%" in text
+    assert "calibrated Hopf 17.043 m/s, fold 15.441 m/s" in text
+    assert "the calibrated simulator's fold (15.44 m/s)" in " ".join(readme.split())
+    assert "notebook 04's stored run has this verdict" in " ".join(readme.split())
     assert run.n_images == 3
 
 

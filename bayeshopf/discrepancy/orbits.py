@@ -11,6 +11,10 @@ and an orbit that does not converge is retried in 4, then 16 smaller steps.
 An orbit is *lost* when it still does not converge, or when its Floquet
 stability no longer matches its branch label (it crossed a fold onto the
 other branch): that branch has no orbit at that μ for these parameters.
+Newton's steps shrink quadratically near a solution, so an orbit whose step,
+from the fifth iteration on, has not fallen by a tenth over two iterations
+(:data:`STALL_FACTOR`) is taken as not converging and stopped there (it goes to
+the smaller homotopy steps), rather than iterated to ``max_iter``.
 
 The parameters are arguments of the compiled solver, so one compilation
 serves every coefficient value.
@@ -57,6 +61,10 @@ _RTOL, _ATOL = 1e-9, 1e-12
 #: Largest number of solver steps per period, far below the simulators' default:
 #: a Newton iterate that blows up stops here.
 _MAX_STEPS = 4096
+#: A Newton iterate whose step exceeds this fraction of its step two iterations
+#: earlier, from iteration :data:`STALL_FROM` on, is stopped as not converging.
+STALL_FACTOR = 0.9
+STALL_FROM = 5
 
 
 def _batched(system: System):
@@ -93,7 +101,7 @@ def _params(p: dict) -> dict:
 
 
 def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
-                 max_iter: int = 20, tol: float = 1e-9) -> OrbitBatch:
+                 max_iter: int = 20, tol: float = 1e-9, sample: bool = True) -> OrbitBatch:
     """Newton's method for all orbits from the warm starts ``(x0, period)`` (module docstring).
 
     Args:
@@ -105,9 +113,10 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
         stable: Expected Floquet stability of each (its branch).
         max_iter: Largest number of Newton steps.
         tol: Convergence on the Newton step relative to the orbit's size.
+        sample: Sample the orbits found (``states``); otherwise ``states`` is NaN.
     """
     ensure_x64()
-    shoot, f, sample = _batched(system)
+    shoot, f, _ = _batched(system)
     p = _params(params)
     xhat = np.array(x0, dtype=np.float64)
     R, n = xhat.shape
@@ -117,13 +126,14 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     done = np.zeros(R, bool)
     alive = np.ones(R, bool)
     mono = np.zeros((R, n, n))
-    for _ in range(max_iter):
+    steps = np.full((max_iter, R), np.inf)          # each iteration's step relative to the size
+    for it in range(max_iter):
         out = np.asarray(shoot(jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p))
         x1, phi, _, f1, okr = split_shot(out, n)
         okr = okr & np.all(np.isfinite(out), axis=1)
         alive &= okr | done
         mono = np.where(done[:, None, None], mono, phi)
-        if done.all():
+        if (done | ~alive).all():
             break
         A = np.zeros((R, n + 1, n + 1))
         A[:, :n, :n] = phi - np.eye(n)
@@ -139,6 +149,10 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
                 alive[i] = False
         # limit a step to a fifth of the orbit's size: a wild iterate would blow up
         size = np.max(np.abs(xhat), axis=1) + 1e-12
+        steps[it] = np.max(np.abs(d[:, :n]), axis=1) / size
+        if it + 1 >= STALL_FROM:
+            alive &= ~(act & (steps[it] > STALL_FACTOR * steps[it - 2]))
+            act = alive & ~done
         big = np.max(np.abs(d[:, :n]), axis=1) / (0.2 * size)
         d = d / np.maximum(big, 1.0)[:, None]
         x = np.where(act[:, None], x + d[:, :n], x)
@@ -152,13 +166,27 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     for i in np.nonzero(ok)[0]:
         if floquet_stable(np.linalg.eigvals(mono[i])) != bool(np.asarray(stable)[i]):
             ok[i] = False
-    states = np.full((R, N_SAMPLES, n), np.nan)
-    if ok.any():
-        idx = np.nonzero(ok)[0]
-        s = np.asarray(sample(jnp.asarray(x[idx]), jnp.asarray(T[idx]), jnp.asarray(mu[idx]),
-                              p, N_SAMPLES))
-        states[idx] = s
+    states = _sample(system, p, x, T, mu, ok) if sample else np.full((R, N_SAMPLES, n), np.nan)
     return OrbitBatch(x0=x, period=T, mu=mu, ok=ok, states=states)
+
+
+def _sample(system: System, p: dict, x, T, mu, ok) -> np.ndarray:
+    """Samples over one period of the orbits found, NaN where lost, ``(R, N_SAMPLES, n)``.
+
+    Every orbit goes in (a lost one as a copy of a found one), so the compiled
+    sampler has one shape per batch size.
+    """
+    R, n = np.shape(x)
+    states = np.full((R, N_SAMPLES, n), np.nan)
+    if not np.any(ok):
+        return states
+    first = int(np.argmax(ok))
+    x = np.where(ok[:, None], x, x[first])
+    T, mu = np.where(ok, T, T[first]), np.where(ok, mu, mu[first])
+    s = np.asarray(_batched(system)[2](jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p,
+                                       N_SAMPLES))
+    states[ok] = s[ok]
+    return states
 
 
 def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch, stable
@@ -170,8 +198,8 @@ def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch,
     """
     ensure_x64()
     stable = np.asarray(stable, bool)
-    res = solve_orbits(system, params_to, start.x0, start.period, start.mu, stable)
-    x0, T, ok, states = res.x0.copy(), res.period.copy(), res.ok & start.ok, res.states.copy()
+    res = solve_orbits(system, params_to, start.x0, start.period, start.mu, stable, sample=False)
+    x0, T, ok = res.x0.copy(), res.period.copy(), res.ok & start.ok
     for n_sub in (4, 16):
         bad = np.nonzero(~ok & start.ok)[0]
         if bad.size == 0:
@@ -183,7 +211,7 @@ def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch,
             w = j / n_sub
             pj = {k: (1 - w) * float(params_from.get(k, 0.0)) + w * float(v)
                   for k, v in params_to.items()}
-            sub = solve_orbits(system, pj, cx, cT, start.mu[bad], stable[bad])
+            sub = solve_orbits(system, pj, cx, cT, start.mu[bad], stable[bad], sample=False)
             alive &= sub.ok
             cx = np.where(sub.ok[:, None], sub.x0, cx)
             cT = np.where(sub.ok, sub.period, cT)
@@ -191,9 +219,9 @@ def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch,
                 break
         if sub is not None:
             good = bad[alive]
-            x0[good], T[good], states[good] = cx[alive], cT[alive], sub.states[alive]
+            x0[good], T[good] = cx[alive], cT[alive]
             ok[good] = True
-    states[~ok] = np.nan
+    states = _sample(system, _params(params_to), x0, T, start.mu, ok)
     return OrbitBatch(x0=x0, period=T, mu=start.mu, ok=ok, states=states)
 
 
