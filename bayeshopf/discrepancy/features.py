@@ -14,7 +14,9 @@ The feature vector of one orbit is :math:`f`, the real and imaginary parts of
 :math:`C'_{z_1,1}`, zero by construction) and the means :math:`C_{c,0}`.
 
 **Measured.** :math:`f` is the peak of the periodogram of :math:`z_1`, refined
-by a 1-D least-squares fit of the harmonic model to the whole record. The
+by a least-squares fit of its fundamental to the whole record (the core's
+:func:`~bayeshopf.features.harmonics.fundamental_frequency`), then by the
+drift of the first harmonic's phase across segments (below). The
 record is cut into segments of ``segment_periods`` periods; in each segment the
 coefficients are fitted by linear least squares at that :math:`f` and turned
 to the common phase. The feature is the mean over segments and its standard
@@ -38,6 +40,7 @@ import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
 from bayeshopf.errors import DataError
+from bayeshopf.features.harmonics import fundamental_frequency
 
 __all__ = ["FeatureLayout", "MeasuredFeatures", "measure", "orbit_coefficients", "simulated"]
 
@@ -146,34 +149,6 @@ def _coeffs(t, Y, f, K) -> tuple[np.ndarray, float]:
     return C, res
 
 
-def _frequency(t: np.ndarray, z: np.ndarray, K: int) -> float:
-    n = z.size
-    dt = t[1] - t[0]
-    zc = z - z.mean()
-    pad = 8 * n
-    P = np.abs(np.fft.rfft(zc * np.hanning(n), pad))
-    freqs = np.fft.rfftfreq(pad, dt)
-    i = int(np.argmax(P[1:])) + 1
-    f = freqs[i]
-    # refine: golden-section on the residual of the harmonic fit to the whole record
-    half = 2.0 / (n * dt)
-    lo, hi = f - half, f + half
-    g = (np.sqrt(5) - 1) / 2
-    Y = z[:, None]
-    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
-    fa, fb = _coeffs(t, Y, a, K)[1], _coeffs(t, Y, b, K)[1]
-    for _ in range(24):
-        if fa < fb:
-            hi, b, fb = b, a, fa
-            a = hi - g * (hi - lo)
-            fa = _coeffs(t, Y, a, K)[1]
-        else:
-            lo, a, fa = a, b, fb
-            b = lo + g * (hi - lo)
-            fb = _coeffs(t, Y, b, K)[1]
-    return 0.5 * (lo + hi)
-
-
 @dataclass(frozen=True)
 class MeasuredFeatures:
     """Features of every recording of a set.
@@ -229,7 +204,7 @@ def measure(rs: RecordingSet, channels, *, K: int = DEFAULT_K,
     for r in rs:
         t = np.asarray(r.t) - r.t[0]
         Y = np.stack([np.asarray(r.channels[c]) for c in chans], axis=1)
-        f = _frequency(t, Y[:, 0], K)
+        f = fundamental_frequency(t, Y[:, :1], r.name) / (2 * np.pi)
         n_per = int(round(segment_periods / (f * r.dt)))
         m = t.size // max(n_per, 1)
         if m < 2:

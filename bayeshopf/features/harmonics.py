@@ -137,7 +137,7 @@ def _grid_index(t: np.ndarray) -> tuple[np.ndarray, float]:
     return np.rint((t - t[0]) / median).astype(np.int64), median
 
 
-def _frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
+def fundamental_frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
     """Fundamental angular frequency: the periodogram's peak, refined by least squares.
 
     Samples of a record with gaps go back on their uniform grid, zero in the gaps.
@@ -380,7 +380,7 @@ def extract_harmonics(
         if t.size < 4 * n_c:
             raise DataError(f"{rec.name}: at least {4 * n_c} samples expected for "
                             f"{n_harmonics} harmonics; found {t.size}")
-        omega = _frequency(t, w, rec.name)
+        omega = fundamental_frequency(t, w, rec.name)
         if omega * rec.duration < 2 * np.pi:
             raise DataError(f"{rec.name}: at least one period expected; found "
                             f"{omega * rec.duration / (2 * np.pi):.2f} periods")
@@ -406,7 +406,7 @@ def extract_harmonics(
             if u is not None:
                 seg_u.append(c[2:])
             if n_seg > 1:  # the segment's own frequency, for the frequency's spread
-                seg_om.append(_frequency(t[sl], w[sl], rec.name))
+                seg_om.append(fundamental_frequency(t[sl], w[sl], rec.name))
         seg = np.array(seg)
         origin = align_phase(seg)
         seg = shift_origin(seg, origin)
