@@ -137,16 +137,15 @@ def _design(t: np.ndarray, f: float, K: int) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def _coeffs(t, Y, f, K) -> tuple[np.ndarray, float]:
-    """Least-squares ``C`` (n_ch, K+1) of ``Y`` (n_t, n_ch) at frequency ``f``; residual SS."""
+def _coeffs(t, Y, f, K) -> np.ndarray:
+    """Least-squares ``C`` (n_ch, K+1) of ``Y`` (n_t, n_ch) at frequency ``f``."""
     A = _design(t, f, K)
     sol, *_ = np.linalg.lstsq(A, Y, rcond=None)
-    res = float(np.sum((Y - A @ sol) ** 2))
     C = np.empty((Y.shape[1], K + 1), dtype=complex)
     C[:, 0] = sol[0]
     for k in range(1, K + 1):
         C[:, k] = 0.5 * (sol[2 * k - 1] - 1j * sol[2 * k])
-    return C, res
+    return C
 
 
 @dataclass(frozen=True)
@@ -213,7 +212,7 @@ def measure(rs: RecordingSet, channels, *, K: int = DEFAULT_K,
         Cs, ph, tc = [], [], []
         for j in range(m):
             sl = slice(j * n_per, (j + 1) * n_per)
-            C, _ = _coeffs(t[sl], Y[sl], f, K)
+            C = _coeffs(t[sl], Y[sl], f, K)
             ph.append(np.angle(C[0, 1]))
             tc.append(t[sl].mean())
             Cs.append(_fix_phase(C))

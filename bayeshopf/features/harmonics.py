@@ -140,7 +140,21 @@ def _grid_index(t: np.ndarray) -> tuple[np.ndarray, float]:
 def fundamental_frequency(t: np.ndarray, w: np.ndarray, where: str) -> float:
     """Fundamental angular frequency: the periodogram's peak, refined by least squares.
 
+    The peak of the channels' summed Hann-windowed periodogram, refined by
+    SciPy's bounded scalar minimiser to within one bin of it: the frequency
+    whose fit of a mean and one sinusoid per channel leaves the least residual.
     Samples of a record with gaps go back on their uniform grid, zero in the gaps.
+
+    Args:
+        t: Sample times, shape ``(n,)``.
+        w: Samples, shape ``(n, n_channels)``.
+        where: The record's name, for the error.
+
+    Returns:
+        ω in radians per unit of ``t``.
+
+    Raises:
+        DataError: When the periodogram has no peak above zero frequency.
     """
     x = w - w.mean(axis=0)
     idx, dt = _grid_index(t)
