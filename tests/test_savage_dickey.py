@@ -30,7 +30,7 @@ from bayeshopf.discrepancy.nested import (
     use_savage_dickey,
 )
 from bayeshopf.discrepancy.render import _bayes_markdown
-from bayeshopf.discrepancy.verdict import with_bayes_factors
+from bayeshopf.discrepancy.verdict import with_bayes_factors, with_notes
 
 RNG = np.random.default_rng(7)
 N, D = 14, 3
@@ -305,3 +305,11 @@ def test_an_unexplained_verdict_gives_the_discrepancys_bayes_factor():
                              "discrepancy against parameters off is 4.0, of a missing term 2.0.")
     assert v["bayes_factors"]["log_bayes_factor"]["unexplained"] == {"none": 9.0,
                                                                       "parameters off": 4.0}
+
+
+def test_the_preparations_notes_close_the_sentence():
+    v = with_notes({"sentence": "S. Apart from the prior odds, 4.0."},
+                   ["stable branch: no LCO at U = 14.9 m/s", "unstable branch: none either."])
+    assert v["sentence"] == ("S. Apart from the prior odds, 4.0. Note: stable branch: no LCO at "
+                             "U = 14.9 m/s; unstable branch: none either.")
+    assert with_notes({"sentence": "S."}, [])["sentence"] == "S."

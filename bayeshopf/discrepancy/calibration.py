@@ -138,6 +138,7 @@ from bayeshopf.discrepancy.verdict import (
     MIN_MODEL_ERROR,
     build_verdict,
     with_bayes_factors,
+    with_notes,
 )
 from bayeshopf.simulators.base import System, UncertainParameter
 from bayeshopf.simulators.registry import get_system
@@ -575,9 +576,10 @@ def calibrate(recordings: RecordingSet, system: System | str, *, kinds: tuple[st
 
     # 5., 6. the verdict
     verdict = build_verdict(system, lib, fitter, cal, fits, pair_fits, probs, classes,
-                            best_class, best_model, me0, errors[best_model], notes, md)
+                            best_class, best_model, me0, errors[best_model], md)
     verdict = with_bayes_factors(verdict, *_bayes(log_z, fits, pair_fits, probs, best_model,
                                                   scan=scan, pairs=pairs, n=n))
+    verdict = with_notes(verdict, notes)
     secs["total"] = time.perf_counter() - t0
     return CalibrationReport(system=system.name, verdict=verdict, log_z=log_z,
                              probabilities=probs, class_probabilities=classes,

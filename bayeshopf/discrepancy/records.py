@@ -281,8 +281,6 @@ class Unexplained:
         eta_median: Posterior median of η, the discrepancy's relative size.
         eta_ci90: Its 5% and 95% posterior quantiles.
         ell_median: Posterior median of ℓ (units of the diagram coordinates).
-        eta_grid: The grid of η.
-        eta_weights: η's posterior weights on it.
     """
 
     log_z: float
@@ -290,8 +288,6 @@ class Unexplained:
     eta_median: float
     eta_ci90: tuple[float, float]
     ell_median: float
-    eta_grid: np.ndarray = field(repr=False)
-    eta_weights: np.ndarray = field(repr=False)
 
     def to_json(self) -> dict:
         """JSON-serialisable dict."""

@@ -105,11 +105,6 @@ def _grid(dist, lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     return g, np.diff(cdf)
 
 
-def _logmeanexp(a: np.ndarray) -> float:
-    m = float(np.max(a))
-    return m + float(np.log(np.mean(np.exp(a - m))))
-
-
 def evidence_grid(E: np.ndarray, G: np.ndarray, rows: dict[int, np.ndarray],
                   W: dict[int, np.ndarray], etas: np.ndarray, kernels: np.ndarray
                   ) -> np.ndarray:
@@ -186,7 +181,9 @@ def unexplained(cal: Calibration) -> Unexplained:
     # τ's grid points have equal prior weight; η's and ℓ's carry their cells' prior mass
     lw = (np.log(np.maximum(p_eta, 1e-300))[None, :, None]
           + np.log(np.maximum(p_ell, 1e-300))[None, None, :])
-    log_bf = _logmeanexp(special.logsumexp(lz + lw, axis=(1, 2))) - _logmeanexp(lz0)
+    # the ratio of the two means over the same τ points (their counts cancel)
+    log_bf = float(special.logsumexp(special.logsumexp(lz + lw, axis=(1, 2)))
+                   - special.logsumexp(lz0))
     w = np.exp(lz + lw - (lz + lw).max())
     w_eta = w.sum(axis=(0, 2))
     w_eta /= w_eta.sum()
@@ -197,4 +194,4 @@ def unexplained(cal: Calibration) -> Unexplained:
     ell_med = float(np.exp(np.interp(0.5, np.cumsum(w_ell) - 0.5 * w_ell, np.log(ells))))
     return Unexplained(log_z=float(cal.log_z + log_bf), log_bf=float(log_bf),
                        eta_median=float(q[1]), eta_ci90=(float(q[0]), float(q[2])),
-                       ell_median=ell_med, eta_grid=etas, eta_weights=w_eta)
+                       ell_median=ell_med)

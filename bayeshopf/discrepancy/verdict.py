@@ -52,7 +52,7 @@ from bayeshopf.discrepancy.terms import Library
 from bayeshopf.simulators.base import System
 
 __all__ = ["MIN_MODEL_ERROR", "band_words", "build_verdict", "located",
-           "with_bayes_factors"]
+           "with_bayes_factors", "with_notes"]
 
 #: A model error whose 90% interval lies above this (0.1% of the amplitude) remains: a
 #: reporting threshold, not part of the evidence, above the agreement of the feature
@@ -89,7 +89,7 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                   fits: Sequence[CalibratedTermFit], pair_fits: Sequence[CalibratedPairFit],
                   probs: Mapping[str, float], classes: Mapping[str, float],
                   best_class: str, best_model: str, me0: ModelError, me_best: ModelError,
-                  notes: Sequence[str], md: Unexplained | None = None) -> dict:
+                  md: Unexplained | None = None) -> dict:
     """The report's ``verdict`` (module docstring).
 
     Args:
@@ -105,7 +105,6 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
         best_model: Its most probable model.
         me0: Posterior of the model error with every parameter nominal.
         me_best: Under ``best_model``.
-        notes: Notes of the preparation, appended to the sentence.
         md: The model "unexplained", where compared.
 
     Returns:
@@ -205,8 +204,6 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
                      + f" (probabilities {probs[best_model]:.2g} against "
                      + ", ".join(f"{probs[k]:.2g}" for k in rivals) + ").")
     sentence += tail
-    if notes:
-        sentence += " Note: " + " ".join(notes)
     return {"kind": kind, "probability": classes[best_class], "model": best_model,
             "model_probability": float(probs.get(best_model, classes[best_class])),
             "parameters": [p.name for p in off] if kind in (KIND_PARAMS, KIND_TERM) else [],
@@ -217,6 +214,14 @@ def build_verdict(system: System, lib: Library, fitter: Fitter, cal: Calibration
             "model_error": {"nominal": me0.to_json(), "final": me_best.to_json()},
             "remaining": {"significant": remains, "where": where},
             "sentence": sentence}
+
+
+def with_notes(verdict: Mapping, notes: Sequence[str]) -> dict:
+    """The verdict with the preparation's notes closing its sentence, after the Bayes factors."""
+    v = dict(verdict)
+    if notes:
+        v["sentence"] += " Note: " + "; ".join(n.rstrip(". ") for n in notes) + "."
+    return v
 
 
 def band_words(b: Mapping) -> str:
