@@ -617,3 +617,30 @@ def test_the_hidden_layer_seed_and_the_discrepancy_reach_the_spec():
     back = cm.CollapsedSpec.from_dict(json.loads(json.dumps(disc.to_dict())))
     assert back.discrepancy_scale == disc.discrepancy_scale
     assert back.discrepancy_floor == 0.5
+
+
+_ORBIT_PROGRAM = """
+import jax.numpy as jnp
+from bayeshopf.cli.main import prepare_runtime
+prepare_runtime()
+from bayeshopf.discrepancy.orbits import _flow_jacobian
+from bayeshopf.simulators import FLUTTER3DOF as system
+n = system.n_states
+text = _flow_jacobian(system.rhs).lower(jnp.ones((2, n)), jnp.ones(2), jnp.ones(2) * 16.0,
+                                        system.param_tree()).as_text()
+print(text.count("python_cpu_callback"))
+"""
+
+
+@pytest.mark.parametrize("user", [None, "raise"])
+def test_the_clis_orbit_programs_hold_no_host_callback_unless_the_user_asks(user):
+    """JAX's persistent cache stores no program with a host callback, and
+    diffrax checks a solve's save times with one unless equinox is told to give
+    NaN: the CLI tells it so (a user's EQX_ON_ERROR is kept), and the orbits'
+    sampling and sensitivity program then compiles once per machine."""
+    env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
+    if user is not None:
+        env["EQX_ON_ERROR"] = user
+    out = subprocess.run([sys.executable, "-c", _ORBIT_PROGRAM], env=env, capture_output=True,
+                         text=True, check=True).stdout.strip().splitlines()[-1]
+    assert (int(out) == 0) == (user is None), out

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib
+import os
 import sys
 import traceback
 from collections.abc import Iterable
@@ -30,6 +31,8 @@ from bayeshopf.errors import BayesHopfError
 EXIT_USAGE = 2
 EXIT_ERROR = 1
 EXIT_INTERRUPTED = 130
+#: Equinox's mode for its run-time checks in the CLI's process (:func:`prepare_runtime`).
+EQX_ON_ERROR = ("EQX_ON_ERROR", "nan")
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,15 @@ def prepare_runtime() -> None:
     otherwise take the cores from NUTS's devices) is set before a command's
     imports load SciPy's OpenBLAS; a CPU device per core, up to NUTS's chains,
     and the persistent compilation cache before any JAX work.
+
+    Equinox's run-time checks (diffrax's of a solve's save times) are host
+    callbacks, and JAX's persistent cache stores no program that holds one, so
+    the periodic orbits' programs would compile again in every process. Every
+    solve here sets ``throw=False`` and reads its result code, so the checks
+    are set to give NaN instead (``EQX_ON_ERROR=nan``, unless the user set it;
+    equinox reads it when it is first imported, after this).
     """
+    os.environ.setdefault(EQX_ON_ERROR[0], EQX_ON_ERROR[1])
     from bayeshopf._preload import available_cores
     from bayeshopf.inference.cache import configure_xla_cpu, enable_compilation_cache
 
