@@ -97,7 +97,9 @@ class OrbitBatch:
 
 
 def _params(p: dict) -> dict:
-    return {k: jnp.asarray(v, dtype=jnp.float64) for k, v in p.items()}
+    """The parameters as float64 NumPy scalars: the compiled calls take them as they are
+    (a JAX array per parameter would cost a device transfer each, at every call)."""
+    return {k: np.asarray(v, dtype=np.float64) for k, v in p.items()}
 
 
 def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
