@@ -19,7 +19,10 @@ on μ learned; ``kernel_nu3``: that scale fixed at 3; every other setting the de
   500 Hz, 1.5% noise (the reference class's design);
 * ``short``: the same orbits, 2 s at 1 kHz (a few periods, one or two segments);
 * ``sweep``: 5 stable orbits and 2 unstable ones in the lower half of the gap
-  (none near the Hopf point), 20 s at 500 Hz.
+  (none near the Hopf point), 20 s at 500 Hz;
+* ``dense`` (a diagnostic, not in the default list): 8 stable and 8 unstable
+  orbits from 0.08 to 1.15 of the gap, 20 s at 500 Hz: what is left when
+  little has to be extrapolated.
 
 For μ0 and the fold it records the 90% interval, whether it holds the truth, and
 the interval score ``(hi − lo) + 20·dist(truth, [lo, hi])`` (Gneiting & Raftery
@@ -46,7 +49,12 @@ DESIGNS = {
                   duration_s=2.0, rate_hz=1000.0),
     "sweep": dict(stable=(0.15, 0.4, 0.65, 0.9, 1.15), unstable=(0.2, 0.45),
                   duration_s=20.0, rate_hz=500.0),
+    "dense": dict(stable=(0.1, 0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.15),
+                  unstable=(0.08, 0.2, 0.32, 0.44, 0.56, 0.68, 0.8, 0.92),
+                  duration_s=20.0, rate_hz=500.0),
 }
+#: The designs run when ``--designs`` is not given.
+DEFAULT_DESIGNS = ("paired", "short", "sweep")
 #: The settings each model changes from the defaults.
 MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "discrepancy": dict(discrepancy=True, nn_width=16),
@@ -185,7 +193,7 @@ def main(argv):
     if seeds is None and len(bounds) == 2:
         seeds = list(range(bounds[0], bounds[1] + 1))
     designs = (argv[argv.index("--designs") + 1].split(",") if "--designs" in argv
-               else list(DESIGNS))
+               else list(DEFAULT_DESIGNS))
     models = (argv[argv.index("--models") + 1].split(",") if "--models" in argv
               else None)
     unknown = [m for m in models or () if m not in MODELS]

@@ -17,8 +17,9 @@ Every analysis runs ``bayeshopf discrepancy DATA --simulator flutter3dof
     python benchmarks/bench_discrepancy_speed.py [--repeat N] [--label L]
 
 Writes ``benchmarks/discrepancy_speed.md`` (the table the documents quote) and
-its JSON beside it, or with ``--label L`` ``benchmarks/results/discrepancy_speed_L.json``
-only (a per-run copy, e.g. another commit's code through ``PYTHONPATH``).
+its rows to ``benchmarks/results/discrepancy_speed.json``, or with ``--label L``
+``benchmarks/results/discrepancy_speed_L.json`` only (a per-run copy, e.g.
+another commit's code through ``PYTHONPATH``).
 """
 
 from __future__ import annotations
@@ -95,10 +96,8 @@ def main(repeat: int = 1, label: str | None = None) -> None:
     record = {"cpu_count": os.cpu_count(), "code": os.environ.get("PYTHONPATH") or str(HERE.parent),
               "runs": rows}
     text = json.dumps(record, indent=1)
-    if label:
-        atomic_write(RESULTS_DIR / f"discrepancy_speed_{label}.json", text)
-    else:
-        atomic_write(HERE / "discrepancy_speed.json", text)
+    atomic_write(RESULTS_DIR / f"discrepancy_speed{'_' + label if label else ''}.json", text)
+    if not label:
         atomic_write(HERE / "discrepancy_speed.md", table(record))
     print(table(record))
 
