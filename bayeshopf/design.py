@@ -13,7 +13,7 @@ The model error away from the recordings enters at its base scale
 (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`, or the scale the fit was
 given), not at the wider scale the draws of a fit whose relative model error
 is above its limit take for bands of new measurements
-(:func:`~bayeshopf.posterior.default_extrapolation_scale`): as scatter in
+(:func:`~bayeshopf.predictive.default_extrapolation_scale`): as scatter in
 ``τ_s`` that wider scale would discount every candidate away from the
 recordings, near the fold most, in fits of a few recordings whose relative
 model error is still near its prior. With the model discrepancy
@@ -91,7 +91,7 @@ import numpy as np
 from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.errors import FitError
 from bayeshopf.model import collapsed as cm
-from bayeshopf.posterior import N_BAND_DRAWS as N_DRAWS  # the bands' draws, aligned
+from bayeshopf.predictive import N_BAND_DRAWS as N_DRAWS  # the bands' draws, aligned
 
 __all__ = ["Candidate", "DesignResult", "NO_GAIN_SE", "TARGETS", "candidate_grid",
            "next_measurements"]
@@ -318,7 +318,7 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     model discrepancy where the fit has it); the noise is the fit's own
     new-measurement noise (``_noise_sd``), the one path every prediction takes.
     """
-    from bayeshopf import posterior as bp
+    from bayeshopf import predictive as pr
 
     c = np.repeat(coeffs[:, None], N_REPLICATES, axis=1)            # (S, R, 1, 2, 2K+1)
     scale = fit.settings.extrapolation_scale
@@ -327,17 +327,17 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     if fit.settings.extrapolation and scale > 0:
         f = fit.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
-        factor = bp.extrapolation_factor([mu], mu_data, fit.spec.mu_span,
+        factor = pr.extrapolation_factor([mu], mu_data, fit.spec.mu_span,
                                          c.shape[0] * N_REPLICATES, int(rng.integers(2**31)),
                                          scale=scale)
-        c = bp.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
+        c = pr.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
     if fit.spec.has_discrepancy:
         sd = fit._noise_sd(coeffs, se, [mu], branch)[:, None]        # (S, 1, 1, 2, 2K+1)
     else:
-        idx = bp.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
-        sd = bp.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],
+        idx = pr.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
+        sd = pr.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],
                          np.asarray(fit.samples["sigma_rel"])[idx], se)
-    return bp.amplitude_of(fit.spec, c + sd * rng.standard_normal(c.shape))[..., 0]
+    return pr.amplitude_of(fit.spec, c + sd * rng.standard_normal(c.shape))[..., 0]
 
 
 def _similar_se(fit, amplitude: float) -> np.ndarray:
@@ -382,7 +382,7 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
             without a fold (supercritical), no candidate, or a ``min_p_exists``
             outside ``[0, 1]``, a negative ``min_amplitude`` or ``resolution``.
     """
-    from bayeshopf import posterior as bp
+    from bayeshopf import predictive as pr
 
     if target not in TARGETS:
         raise FitError(f"target must be one of {', '.join(TARGETS)}; got {target!r}")
@@ -410,7 +410,7 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
     if mu.size == 0 or not np.all(np.isfinite(mu)):
         raise FitError(f"finite candidate μ expected; got {mu!r}")
 
-    idx = bp.draw_indices(len(fit.samples["mu0"]), N_DRAWS)
+    idx = pr.draw_indices(len(fit.samples["mu0"]), N_DRAWS)
     rng = np.random.default_rng([seed, 22])
     if target == "diagram":
         grid = fit.default_mu_grid(60)
@@ -424,7 +424,7 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
     rows = []
     for b in branches:
         coeffs = fit.orbit_coefficients(mu, b, N_DRAWS)                  # (S, n_mu, 2, 2K+1)
-        amp = bp.amplitude_of(fit.spec, coeffs)                           # (S, n_mu)
+        amp = pr.amplitude_of(fit.spec, coeffs)                           # (S, n_mu)
         for j, m in enumerate(mu):
             a = amp[:, j]
             have = np.isfinite(a)

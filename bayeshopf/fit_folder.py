@@ -262,14 +262,15 @@ class SavedHybrid:
 
         ``None`` without a frequency model, or where no draw has the branch.
         """
-        from bayeshopf import posterior as bp
+        from bayeshopf import predictive as pr
+        from bayeshopf.model.normal_form import branch_sign
 
         if "gamma" not in self.samples:
             return None
-        idx = bp.draw_indices(len(self.samples["gamma"]))
+        idx = pr.draw_indices(len(self.samples["gamma"]))
         theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
-        f = bp.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
-                               bp.branch_sign(branch), predictive=predictive,
+        f = pr.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
+                               branch_sign(branch), predictive=predictive,
                                omega_se=self.predictive_omega_se,
                                seed=int(self.summary.get("seed", 0)))[:, 0]
         f = f[np.isfinite(f)]
@@ -281,7 +282,8 @@ class SavedHybrid:
         A folder without the saved features (an older bayeshopf) predicts from
         the draws alone, without the model error away from the recordings.
         """
-        from bayeshopf import posterior as bp
+        from bayeshopf import predictive as pr
+        from bayeshopf.model.normal_form import branch_sign
 
         if (self.spec.has_discrepancy or self.spec.nn_training is not None
                 or self.extrapolation is not None):
@@ -289,15 +291,15 @@ class SavedHybrid:
                 return self.posterior.amplitude([mu], branch, predictive=predictive)[:, 0]
             except DataError:
                 pass
-        idx = bp.draw_indices(len(self.samples["beta"]))
+        idx = pr.draw_indices(len(self.samples["beta"]))
         s = {k: v[idx] for k, v in self.samples.items()}
         theta = {k: v for k, v in s.items() if k not in ("beta", "gamma")}
-        c = bp.orbit_coefficients(self.spec, theta, s["beta"], [mu], bp.branch_sign(branch))
+        c = pr.orbit_coefficients(self.spec, theta, s["beta"], [mu], branch_sign(branch))
         if predictive:
             rng = np.random.default_rng(int(self.summary.get("seed", 0)))
-            sd = bp.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
+            sd = pr.noise_sd(c, s["sigma"], s["sigma_rel"], self.predictive_se)
             c = c + sd * rng.standard_normal(c.shape)
-        return bp.amplitude_of(self.spec, c)[:, 0]
+        return pr.amplitude_of(self.spec, c)[:, 0]
 
     def predict(self, mu: float, branch: str = "stable", predictive: bool = False,
                 ci: float = CI) -> Interval:

@@ -46,23 +46,6 @@ from bayeshopf.inference.cache import (
 )
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model.normal_form import branch_sign  # noqa: F401 (re-exported)
-from bayeshopf.predictive import (  # noqa: F401 (re-exported: the one prediction path)
-    N_BAND_DRAWS,
-    _common_over_mu,
-    amplitude_of,
-    default_extrapolation_scale,
-    discrepancy_draws,
-    discrepancy_moments,
-    draw_indices,
-    extrapolation_factor,
-    frequency_draws,
-    network_draws,
-    noise_sd,
-    orbit_coefficients,
-    predictive_draws,
-    rms_scale,
-    scale_orbits,
-)
 
 #: :func:`log_likelihood_program` under its earlier name.
 _log_likelihood_program = log_likelihood_program

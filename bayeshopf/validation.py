@@ -58,14 +58,9 @@ from bayeshopf.errors import FitError
 from bayeshopf.features.harmonics import HarmonicFeatures, extract_harmonics
 from bayeshopf.inference.collapsed import CollapsedSettings
 from bayeshopf.model import collapsed as cm
-from bayeshopf.posterior import (
-    HybridPosterior,
-    amplitude_of,
-    branch_sign,
-    fit_hybrid,
-    noise_sd,
-    orbit_coefficients,
-)
+from bayeshopf.model.normal_form import branch_sign
+from bayeshopf.posterior import HybridPosterior, fit_hybrid
+from bayeshopf.predictive import amplitude_of, noise_sd, orbit_coefficients
 
 #: The fits compared, in the order reported.
 METHODS = ("bayes", "map")

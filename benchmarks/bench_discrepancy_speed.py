@@ -47,7 +47,7 @@ def _truth():
     truth = FLUTTER3DOF.with_params(k_h=p["k_h"] * 1.04, c0=p["c0"] * 1.03,
                                     c_alpha=p["c_alpha"] * 0.95)
     # the planting reads typical amplitudes over the default plan, which must exist
-    return truth.replace(default_plan=tuple(zip(map(float, PLAN_MU), PLAN_BRANCH)))
+    return truth.replace(default_plan=tuple(zip(map(float, PLAN_MU), PLAN_BRANCH, strict=True)))
 
 
 def __getattr__(name):

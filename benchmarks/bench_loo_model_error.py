@@ -48,7 +48,7 @@ CI = 0.9
 def _band(post, mu, branch, se, log_s, seed=0):
     """Held-out amplitude draws with ``e^{s z c}``, ``s`` per draw from ``log_s(n, rng)``."""
     import bayeshopf.model.collapsed as cm
-    from bayeshopf.posterior import scale_orbits
+    from bayeshopf.predictive import scale_orbits
 
     f = post.features
     mu_data = f.mu[f.unstable == (branch == "unstable")]

@@ -160,9 +160,9 @@ def test_log_marginal_derivatives_hold_when_the_measurement_errors_are_small():
 
 
 def test_predicted_orbit_coefficients_are_the_fourier_coefficients_of_the_mapped_circle():
-    # posterior.orbit_coefficients (the bands, the diagram, the checks) against the
+    # predictive.orbit_coefficients (the bands, the diagram, the checks) against the
     # DFT of the map evaluated on 256 phases of each draw's circle; nan off the branch
-    from bayeshopf.posterior import orbit_coefficients
+    from bayeshopf.predictive import orbit_coefficients
 
     spec = _spec()
     rng = np.random.default_rng(3)
@@ -222,7 +222,7 @@ def test_amplitude_is_the_peak_to_peak_of_z1_in_physical_units():
     """``amplitude_of`` (z1's coefficients only) against the full orbit mapped point by point."""
     from types import SimpleNamespace
 
-    from bayeshopf.posterior import amplitude_of
+    from bayeshopf.predictive import amplitude_of
 
     rng = np.random.default_rng(3)
     frame = PlanarFrame(np.array([0.6, 0.7]), np.array([[0.02, 0.01], [0.05, 0.3]]))

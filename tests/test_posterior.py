@@ -161,7 +161,7 @@ def test_the_discrepancy_is_known_at_the_recordings_and_the_prior_far_away(plant
 
     from bayeshopf.model import collapsed as cm
     from bayeshopf.model import discrepancy as dm
-    from bayeshopf.posterior import discrepancy_moments
+    from bayeshopf.predictive import discrepancy_moments
 
     post, _, _ = planted_discrepancy
     f = post.features
@@ -403,7 +403,7 @@ def test_the_network_at_infinite_width_fits_predicts_and_saves(planted_infinite_
     spread is known at a training orbit and grows beyond the recordings; a saved fit
     predicts a new measurement there as the fit does."""
     from bayeshopf import fit_folder
-    from bayeshopf.posterior import network_draws
+    from bayeshopf.predictive import network_draws
 
     post, truth = planted_infinite_width
     assert post.spec.nn_training is not None and post.spec.nn_hidden[0].shape == (3, 0)

@@ -97,8 +97,10 @@ class OrbitBatch:
 
 
 def _params(p: dict) -> dict:
-    """The parameters as float64 NumPy scalars: the compiled calls take them as they are
-    (a JAX array per parameter would cost a device transfer each, at every call)."""
+    """The parameters as float64 NumPy scalars, which the compiled calls take as they are.
+
+    A JAX array per parameter would cost a device transfer each, at every call.
+    """
     return {k: np.asarray(v, dtype=np.float64) for k, v in p.items()}
 
 

@@ -76,7 +76,7 @@ class CollapsedSettings:
             :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7)
             where σ_rel is above :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`
             (2%), :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1)
-            otherwise (:func:`~bayeshopf.posterior.default_extrapolation_scale`).
+            otherwise (:func:`~bayeshopf.predictive.default_extrapolation_scale`).
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").

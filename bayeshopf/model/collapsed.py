@@ -87,7 +87,7 @@ per recording and fundamental coefficient, :func:`linear_system`), integrated
 out with the map; its independent part replaces ``σ_rel y`` in ``D``. ``η``
 and ``ℓ`` are sampled with the normal form, so the Hopf and fold intervals
 widen when the recordings disagree with the model, and predictions at a new μ
-take the discrepancy's conditional there (``posterior.discrepancy_draws``).
+take the discrepancy's conditional there (``predictive.discrepancy_draws``).
 With ``spec.discrepancy_scale = None`` the model is the one without it
 (``D = diag(se² + σ_c² + (σ_rel y)²)``).
 

@@ -14,7 +14,7 @@ branch's training recordings,
 the setting ``extrapolation_scale``; unset, a fit with the discrepancy takes
 none, and a fit without it takes :data:`EXTRAPOLATION_SCALE` in a posterior draw
 whose σ_rel is within :data:`SIGMA_REL_LIMIT` and :data:`EXTRAPOLATION_SCALE_MISFIT`
-in one above it (``posterior.default_extrapolation_scale``, the rule of the model
+in one above it (``predictive.default_extrapolation_scale``, the rule of the model
 without the discrepancy, kept while the discrepancy is not the default).
 """
 
@@ -27,7 +27,7 @@ import numpy as np
 #: passes its check (:data:`SIGMA_REL_LIMIT`; module docstring).
 EXTRAPOLATION_SCALE = 0.1
 #: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
-#: (``posterior.default_extrapolation_scale``), for a fit without the discrepancy.
+#: (``predictive.default_extrapolation_scale``), for a fit without the discrepancy.
 EXTRAPOLATION_SCALE_MISFIT = 0.7
 #: Relative model error σ_rel above which a fit without the discrepancy misses the
 #: orbits' sizes (its prior scale, 2% of each coefficient).
