@@ -7,7 +7,7 @@ the held-out amplitude is compared with its 90% posterior predictive band (the
 model's coefficients, the model error away from the data, the model error and
 the held-out recording's own standard errors), and with the same band without
 the model error away from the data (``CollapsedSettings.extrapolation=False``).
-Writes ``benchmarks/loo_collapsed_curved.json`` (the default unfolding, which the
+Writes ``benchmarks/loo_collapsed.json`` (the default unfolding, which the
 docs and tests quote); another unfolding goes to
 ``benchmarks/results/loo_collapsed_<unfolding>.json`` (an ignored folder).
 """
@@ -86,9 +86,10 @@ def main(unfolding="curved"):
         widths = [r["band" + key][2] - r["band" + key][0] for r in rows if r["band" + key]]
         print(f"{what}: {n_in}/{len(rows)} held-out amplitudes inside their 90% predictive "
               f"bands; mean band width {1e3 * np.mean(widths):.2f} mm")
-    path = HERE if unfolding == "curved" else RESULTS_DIR
-    path.mkdir(parents=True, exist_ok=True)
-    (path / f"loo_collapsed_{unfolding}.json").write_text(json.dumps(rows, indent=1))
+    path = (HERE / "loo_collapsed.json" if unfolding == "curved"
+            else RESULTS_DIR / f"loo_collapsed_{unfolding}.json")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

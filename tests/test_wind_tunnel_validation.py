@@ -62,7 +62,7 @@ def test_default_bands_hold_every_held_out_amplitude_at_four_times_the_legacy_wi
 
 @pytest.mark.slow
 def test_at_scale_0_1_held_out_orbits_at_the_branch_ends_are_not_covered(loo_narrow):
-    """benchmarks/loo_collapsed_curved.json (seed 0, the scale 0.1 in every draw): 4/7.
+    """benchmarks/loo_collapsed.json (seed 0, the scale 0.1 in every draw): 4/7.
 
     The unstable 14.9 and 16.5 m/s recordings are missed (without one of them
     the fold and the Hopf point move), and so, since the control term (stop

@@ -174,6 +174,16 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     return OrbitBatch(x0=x, period=T, mu=mu, ok=ok, states=states)
 
 
+def _lost_as_found(ok, *arrays) -> list[np.ndarray]:
+    """Each array (one row per orbit) with the lost orbits' rows replaced by the first found one's.
+
+    A batch then goes into the compiled programs whole, one shape per batch size.
+    """
+    first = int(np.argmax(ok))
+    return [np.where(np.reshape(ok, (-1,) + (1,) * (np.ndim(a) - 1)), a, np.asarray(a)[first])
+            for a in arrays]
+
+
 def _sample(system: System, p: dict, x, T, mu, ok) -> np.ndarray:
     """Samples over one period of the orbits found, NaN where lost, ``(R, N_SAMPLES, n)``.
 
@@ -184,9 +194,7 @@ def _sample(system: System, p: dict, x, T, mu, ok) -> np.ndarray:
     states = np.full((R, N_SAMPLES, n), np.nan)
     if not np.any(ok):
         return states
-    first = int(np.argmax(ok))
-    x = np.where(ok[:, None], x, x[first])
-    T, mu = np.where(ok, T, T[first]), np.where(ok, mu, mu[first])
+    x, T, mu = _lost_as_found(ok, x, T, mu)
     s = np.asarray(_batched(system)[2](jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p,
                                        N_SAMPLES))
     states[ok] = s[ok]
@@ -289,10 +297,7 @@ def sensitivities(system: System, params: dict, ob: OrbitBatch, names: Sequence[
         return dS, dT
     p = _params(params)
     # every orbit goes in (one compiled shape); a lost one runs as a copy of a found one
-    first = int(np.argmax(ok))
-    x0 = np.where(ok[:, None], ob.x0, ob.x0[first])
-    T = np.where(ok, ob.period, ob.period[first])
-    mu = np.where(ok, ob.mu, ob.mu[first])
+    x0, T, mu = _lost_as_found(ok, ob.x0, ob.period, ob.mu)
     out = _flow_jacobian(system.rhs)(jnp.asarray(x0), jnp.asarray(T), jnp.asarray(mu), p)
     Jx, JT = np.asarray(out[1]), np.asarray(out[2])
     Q = np.stack([np.asarray(out[3][k]) for k in names], axis=-1)      # (R, N+1, n, m)
