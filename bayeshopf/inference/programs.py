@@ -23,6 +23,7 @@ from bayeshopf.inference.cache import compile_ahead, compiled_function, on_relea
 from bayeshopf.inference.settings import ModelInputs
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import discrepancy as dm
+from bayeshopf.model import horizontal as hz
 from bayeshopf.model import network_kernel as nk
 
 
@@ -53,6 +54,9 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
         v["gap_fold"] = 0.3 * spec.mu_span
         if spec.unfolding == "curved":
             v["w_unfold"] = 0.0
+        if spec.unfolding == "horizontal":
+            v.update(eta_h=0.5 * hz.ETA_PRIOR, ell_h=hz.LENGTH_PRIOR[0],
+                     z_h=np.zeros(hz.N_BASIS))
     else:
         v["kappa"] = 0.3 / spec.mu_span
     return {k: jnp.asarray(x, dtype=float) for k, x in v.items()}

@@ -46,7 +46,9 @@ class CollapsedSettings:
         nn_seed: Seed of the network's fixed hidden layer (a draw from its
             prior, :func:`~bayeshopf.model.collapsed.hidden_layer`; refit with
             others to see what the draw decides); unused at infinite width.
-        unfolding: ``"curved"`` (default) or ``"linear"`` (the paper's ``μ − μ0``).
+        unfolding: ``"curved"`` (default), ``"linear"`` (the paper's ``μ − μ0``)
+            or ``"horizontal"`` (the curve in μ with a Gaussian process in its
+            curvature, :mod:`bayeshopf.model.horizontal`; subcritical only).
         inference: ``"nuts"`` (default) or ``"svi"``.
         num_chains: NUTS chains.
         num_warmup: NUTS warm-up steps per chain.
@@ -167,8 +169,9 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | 
     """
     if criticality not in ("subcritical", "supercritical"):
         raise FitError(f"criticality must be 'subcritical' or 'supercritical'; got {criticality!r}")
-    if unfolding not in ("curved", "linear"):
-        raise FitError(f"unfolding must be 'curved' or 'linear'; got {unfolding!r}")
+    if unfolding not in ("curved", "linear", "horizontal"):
+        raise FitError("unfolding must be 'curved', 'linear' or 'horizontal'; got "
+                       f"{unfolding!r}")
     mu = features.mu
     if np.unique(mu).size < 2:
         raise FitError(f"the fit needs recordings at two or more distinct values of μ; found "

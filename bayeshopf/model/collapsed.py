@@ -106,6 +106,7 @@ import numpyro.distributions as dist
 
 from bayeshopf.features.harmonics import coefficient_names
 from bayeshopf.model import discrepancy as dm
+from bayeshopf.model import horizontal as hz
 from bayeshopf.model import network_kernel as nk
 from bayeshopf.model.extrapolation import (  # noqa: F401 (re-exported)
     EXTRAPOLATION_LENGTH,
@@ -344,6 +345,8 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
             mu_fold, spec.mu_unstable_max)
         mu0 = numpyro.deterministic("mu0", anchor + g_hopf)
         theta = {"mu0": mu0, "mu_fold": mu_fold}
+        if spec.unfolding == "horizontal":
+            return {**theta, **hz.sites(mu0, mu_fold)}
         if spec.unfolding == "curved":
             w = numpyro.sample("w_unfold", dist.Normal(0.0, UNFOLDING_PRIOR_SD))
             theta["w_unfold"] = w

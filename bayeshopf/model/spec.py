@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.features.frame import PlanarFrame
-from bayeshopf.model import normal_form
+from bayeshopf.model import horizontal, normal_form
 
 #: Monomials ``ũ1^i ũ2^j`` of the map, by degree ``i + j`` (0: T_s; 1: T_L's gains;
 #: 2 and 3: the polynomial shape terms), each also multiplied by μ̃ and μ̃².
@@ -42,8 +42,10 @@ class CollapsedSpec:
             network (a fixed draw from their unit-normal prior).
         mu_label: Name of μ.
         mu_units: Unit of μ.
-        unfolding: ``"linear"`` (the paper's ``μ − μ0``) or ``"curved"``
-            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior).
+        unfolding: ``"linear"`` (the paper's ``μ − μ0``), ``"curved"``
+            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior)
+            or ``"horizontal"`` (the linear one plus a Gaussian process along
+            the diagram's curve, :mod:`bayeshopf.model.horizontal`).
         omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
             ``None`` for a model without the frequency.
         control_scale: Prior sd of the control's gain ``h`` (frame units per
@@ -165,8 +167,15 @@ def unfolding(mu, mu0, w, mu_fold):
 
 
 def radius(spec: CollapsedSpec, mu, sign, theta: dict):
-    """Normal-form LCO radius at μ (``nan`` where the branch does not exist)."""
+    """Normal-form LCO radius at μ (``nan`` where the branch does not exist).
+
+    With the horizontal discrepancy (``theta`` holds ``h_coef``), the root of
+    its curve (:func:`~bayeshopf.model.horizontal.position`), ``r = √(a2 x)``.
+    """
     a2, a4 = theta.get("a2", -1.0), theta.get("a4", -1.0)
+    if "h_coef" in theta:
+        x = horizontal.position(mu, sign, theta["mu0"], theta["mu_fold"], theta["h_coef"])
+        return jnp.sqrt(a2 * x)
     if "w_unfold" in theta:
         beta = unfolding(mu, theta["mu0"], theta["w_unfold"], theta["mu_fold"])
         return normal_form.lco_radius(beta, 0.0, a2, sign, a4)

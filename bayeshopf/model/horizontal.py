@@ -1,0 +1,183 @@
+r"""Horizontal model discrepancy: the diagram's curve ``μ(x)``, its curvature a Gaussian process.
+
+The vertical discrepancy (:mod:`bayeshopf.model.discrepancy`) adds a smooth
+error to the orbit's size at each point of the diagram. A smooth vertical
+change of a curve keeps its vertical tangents, so it cannot move the fold, and
+being relative to the orbit it cannot move the Hopf point either. This module
+puts the model's error where both live: along μ. With ``x = r²/a_2`` (``x = 0``
+at the Hopf point, ``½`` at the fold) the linear unfolding's limit cycles lie on
+``μ = μ_SN + Δ·4(x − ½)²``, ``Δ = μ_H − μ_SN = a_2²/4``: a curve of constant
+curvature in ``x``. Here the curvature varies,
+
+.. math::
+
+    μ(x) = μ_{SN} + Δ\,H(x),\qquad
+    H(x) = \frac{\int_{1/2}^{x} (x - t)\, e^{e(t)}\,dt}{\int_0^{1/2} t\, e^{e(t)}\,dt},
+    \qquad e \sim \mathcal{GP}\big(0,\ η_h^2\, e^{-(x-x')^2/2ℓ_h^2}\big),
+
+so ``μ''(x) ∝ e^{e(x)} > 0``: one fold at ``x = ½`` (``H = H' = 0``), the Hopf
+point at ``x = 0`` (``H = 1``), both branches monotone, and ``e ≡ 0`` is the
+normal form (``H = 4(x − ½)²``). The Hopf point ``μ_H`` and the fold ``μ_SN``
+stay the model's sites (the gaps of
+:func:`~bayeshopf.model.collapsed.normal_form_sites`); ``e`` changes how the
+branches run between and beyond them, so how far the recordings place them
+depends on how well the curve's shape is known, with a learned size ``η_h``.
+``a_2 = 2√Δ`` keeps the radius's scale that of the normal form.
+
+A recording at μ on the unstable branch is the root of ``H(x) = (μ − μ_SN)/Δ``
+in ``[0, ½]``, on the stable branch the root above ``½`` (Newton's steps
+safeguarded by a bracket, then one more for the derivatives), its radius
+``r = √(a_2 x)``; the integrals are Gauss–Legendre sums (:data:`N_NODES`) over ``[½, x]``.
+
+**The process** is the reduced-rank expansion of Solin & Särkkä (2020) on
+``[−L, L]`` (:data:`HALF_WIDTH`, :data:`N_BASIS`):
+``e(x) = Σ_k c_k L^{−½} \sin(ω_k (x + L))``, ``ω_k = πk/(2L)``,
+``c_k = z_k √S(ω_k)``, ``z_k ~ N(0, 1)`` sampled (non-centred),
+``S(ω) = η_h² √(2π) ℓ_h e^{−ℓ_h² ω²/2}`` the squared exponential's
+spectral density. With few basis functions it is a smooth process of its own:
+within 3% of the squared exponential's covariance for ``ℓ_h ≤ ½`` on
+``x ∈ [0, 1.2]`` (the unstable branch and the stable one up to a little
+above the Hopf point), smoother for shorter lengths, and pulled to 0 (the
+normal form's curvature) towards ``|x| = L``.
+
+**Priors** (stated, informative): ``η_h ~ HalfNormal(`` :data:`ETA_PRIOR` ``)``
+(the log of the curvature), ``ℓ_h ~ LogNormal`` (:data:`LENGTH_PRIOR`, in units
+of ``x``: the unstable branch spans ``[0, ½]``).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro
+import numpyro.distributions as dist
+
+#: Half-normal scale of ``η_h``, the size of the log curvature's discrepancy.
+ETA_PRIOR = 0.5
+#: Log-normal prior of ``ℓ_h`` (median, log-sd), in units of ``x = r²/a_2``.
+LENGTH_PRIOR = (0.5, 0.5)
+#: Basis functions of the reduced-rank process.
+N_BASIS = 6
+#: ``L``: the process lives on ``[−L, L]`` in ``x``.
+HALF_WIDTH = 2.0
+#: Safeguarded Newton steps of the roots.
+N_STEPS = 12
+#: Gauss–Legendre nodes of the curve's integrals.
+N_NODES = 24
+
+
+def frequencies() -> np.ndarray:
+    """``ω_k = πk/(2L)``, ``k = 1..m``."""
+    return np.pi * np.arange(1, N_BASIS + 1) / (2.0 * HALF_WIDTH)
+
+
+def coefficients(eta, ell, z):
+    """``c_k = z_k √S(ω_k)`` for the squared-exponential spectral density, shape of ``z``."""
+    w = frequencies()
+    eta, ell = jnp.asarray(eta)[..., None], jnp.asarray(ell)[..., None]
+    s = eta**2 * jnp.sqrt(2.0 * jnp.pi) * ell * jnp.exp(-0.5 * (ell * w) ** 2)
+    return z * jnp.sqrt(s)
+
+
+def _phases(x):
+    return jnp.asarray(x)[..., None] * frequencies() + frequencies() * HALF_WIDTH
+
+
+def discrepancy(x, c):
+    """``e(x)`` for ``x`` (...) and coefficients ``c`` (..., m), broadcasting."""
+    return jnp.sum(jnp.sin(_phases(x)) * c, axis=-1) / np.sqrt(HALF_WIDTH)
+
+
+def _nodes():
+    t, w = np.polynomial.legendre.leggauss(N_NODES)
+    return 0.5 * (t + 1.0), 0.5 * w                       # on [0, 1]
+
+
+def _moments(x, c):
+    """``(∫_{½}^x (x−t) e^{e} dt, ∫_{½}^x e^{e} dt)`` by Gauss–Legendre, shape of ``x``."""
+    u, w = _nodes()
+    x = jnp.asarray(x)
+    t = 0.5 + (x[..., None] - 0.5) * u                      # (..., n)
+    f = jnp.exp(discrepancy(t, c[..., None, :]))
+    d = x - 0.5
+    return d**2 * jnp.sum(w * (1.0 - u) * f, axis=-1), d * jnp.sum(w * f, axis=-1)
+
+
+def _norm(c):
+    """``∫_0^{½} t e^{e(t)} dt`` (``1/8`` for ``e ≡ 0``)."""
+    return _moments(jnp.zeros(jnp.shape(c)[:-1]), c)[0]
+
+
+def curve(x, c):
+    """``H(x)``: 0 at the fold ``x = ½``, 1 at the Hopf point ``x = 0``."""
+    return _moments(x, c)[0] / _norm(c)
+
+
+def slope(x, c):
+    """``H'(x)``."""
+    return _moments(x, c)[1] / _norm(c)
+
+
+def _root(g, lo, hi, x0):
+    """The root of an increasing ``g`` in ``[lo, hi]`` (elementwise) from ``x0``.
+
+    Newton's steps, each replaced by the bracket's midpoint where it would
+    leave the bracket, which shrinks with every step (safeguarded Newton).
+    ``g`` returns ``(g, g')``.
+    """
+    def step(_, b):
+        lo, hi, x = b
+        f, df = g(x)
+        lo, hi = jnp.where(f > 0, lo, x), jnp.where(f > 0, x, hi)
+        xn = x - f / jnp.where(df > 0, df, 1.0)
+        inside = (df > 0) & (xn >= lo) & (xn <= hi)
+        return lo, hi, jnp.where(inside, xn, 0.5 * (lo + hi))
+    return jax.lax.fori_loop(0, N_STEPS, step, (lo, hi, x0))[2]
+
+
+def position(mu, sign, mu_hopf, mu_fold, c):
+    """``x`` of the limit cycle at μ on the branch ``sign`` (+1 stable), ``nan`` where none.
+
+    ``mu`` and ``sign`` broadcast against the draws' leading shape of
+    ``mu_hopf``, ``mu_fold`` and ``c`` (..., m).
+    """
+    shape = jnp.broadcast_shapes(jnp.shape(mu), jnp.shape(sign), jnp.shape(mu_hopf),
+                                 jnp.shape(c)[:-1])
+    c = jnp.broadcast_to(c, shape + jnp.shape(c)[-1:])
+    v = jnp.broadcast_to((mu - mu_fold) / (mu_hopf - mu_fold), shape)
+    stable = jnp.broadcast_to(sign, shape) > 0
+    # H ≥ 4 e^{−2E} (x − ½)² with E ≥ |e|: a bracket of the stable root
+    e_abs = jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
+    top = 0.5 + jnp.sqrt(jnp.maximum(v, 0.0) * jnp.exp(2.0 * e_abs) / 4.0) + 1e-9
+    lo = jnp.where(stable, 0.5, 0.0)
+    hi = jnp.where(stable, top, 0.5)
+    direction = jnp.where(stable, 1.0, -1.0)            # H rises on the stable side
+    x0 = jnp.clip(0.5 + direction * 0.5 * jnp.sqrt(jnp.maximum(v, 0.0)), lo, hi)
+
+    def g(x):
+        m, dm = _moments(x, c)
+        n = _norm(c)
+        return direction * (m / n - v), direction * dm / n
+
+    xb = jax.lax.stop_gradient(_root(g, lo, hi, x0))
+    fp = slope(xb, c)
+    safe = jnp.abs(fp) > 1e-12
+    x = xb - jnp.where(safe, (curve(xb, c) - v) / jnp.where(safe, fp, 1.0), 0.0)
+    ok = (v >= -1e-12) & (stable | (v <= 1.0 + 1e-12))
+    return jnp.where(ok, x, jnp.nan)
+
+
+def sites(mu0, mu_fold) -> dict:
+    """The horizontal discrepancy's NumPyro sites, given the Hopf point and the fold.
+
+    Called by :func:`~bayeshopf.model.collapsed.normal_form_sites`: ``η_h``,
+    ``ℓ_h`` and the process's standard-normal weights ``z_h``; then, as
+    deterministic sites, its coefficients ``h_coef`` and ``a2 = 2√(μ0 − μ_SN)``,
+    the radius's scale.
+    """
+    eta = numpyro.sample("eta_h", dist.HalfNormal(ETA_PRIOR))
+    ell = numpyro.sample("ell_h", dist.LogNormal(np.log(LENGTH_PRIOR[0]), LENGTH_PRIOR[1]))
+    z = numpyro.sample("z_h", dist.Normal(0.0, 1.0).expand([N_BASIS]).to_event(1))
+    return {"h_coef": numpyro.deterministic("h_coef", coefficients(eta, ell, z)),
+            "a2": numpyro.deterministic("a2", 2.0 * jnp.sqrt(mu0 - mu_fold))}

@@ -1,0 +1,150 @@
+"""The horizontal discrepancy's curve against SciPy's root finds and the closed form."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import quad
+from scipy.optimize import brentq
+
+from bayeshopf import ensure_x64
+from bayeshopf.model import horizontal as hz
+from bayeshopf.model import normal_form
+
+ensure_x64()
+
+
+def _coefficients(seed, eta=0.5, ell=0.3):
+    z = np.random.default_rng(seed).standard_normal(hz.N_BASIS)
+    return hz.coefficients(eta, ell, jnp.asarray(z))
+
+
+def test_basis_reproduces_the_squared_exponential_kernel():
+    """Σ_k S(ω_k) φ_k(x) φ_k(x') against η² exp(−(x−x')²/2ℓ²), where the docs say it holds."""
+    eta, ell = 0.2, 0.5
+    x = np.linspace(0.0, 1.2, 9)
+    w = hz.frequencies()
+    phi = np.sin((x[:, None] + hz.HALF_WIDTH) * w) / np.sqrt(hz.HALF_WIDTH)
+    s = np.asarray(hz.coefficients(eta, ell, jnp.ones(hz.N_BASIS))) ** 2
+    approx = (phi * s) @ phi.T
+    exact = eta**2 * np.exp(-0.5 * (x[:, None] - x[None]) ** 2 / ell**2)
+    np.testing.assert_allclose(approx, exact, atol=0.03 * eta**2)
+
+
+def _curve_by_quad(c):
+    """``H`` by SciPy's adaptive quadrature of the module's formula, written apart."""
+    w = hz.frequencies()
+    cn = np.asarray(c)
+
+    def e(t):
+        return float(np.sum(np.sin(w * (t + hz.HALF_WIDTH)) * cn) / np.sqrt(hz.HALF_WIDTH))
+
+    norm = quad(lambda t: t * np.exp(e(t)), 0.0, 0.5, epsabs=1e-14)[0]
+    return lambda x: quad(lambda t: (x - t) * np.exp(e(t)), 0.5, x, epsabs=1e-14)[0] / norm
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_curve_and_roots_match_scipy(seed):
+    c = _coefficients(seed)
+    H = _curve_by_quad(c)
+    for x in (0.0, 0.2, 0.5, 0.9, 1.6):
+        assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
+    assert H(0.0) == pytest.approx(1.0, abs=1e-12)
+    hopf, fold = 18.0, 14.0
+    for mu in (14.3, 15.5, 17.2, 17.95, 19.0):
+        v = (mu - fold) / (hopf - fold)
+        x_s = brentq(lambda t, v=v: H(t) - v, 0.5, 4.0, xtol=1e-14)
+        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=1e-8)
+        if mu < hopf:
+            x_u = brentq(lambda t, v=v: H(t) - v, 0.0, 0.5, xtol=1e-14)
+            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=1e-8)
+    # no limit cycle below the fold; no unstable one above the Hopf point
+    assert np.isnan(float(hz.position(13.9, 1.0, hopf, fold, c)))
+    assert np.isnan(float(hz.position(18.1, -1.0, hopf, fold, c)))
+
+
+def test_without_discrepancy_the_curve_is_the_normal_form():
+    c = jnp.zeros(hz.N_BASIS)
+    a2 = 2.0 * np.sqrt(18.0 - 14.0)
+    mu = np.array([14.5, 16.0, 17.5])
+    for sign in (1.0, -1.0):
+        r = np.sqrt(a2 * np.asarray(hz.position(jnp.asarray(mu), sign, 18.0, 14.0, c)))
+        np.testing.assert_allclose(r, np.asarray(normal_form.lco_radius(mu, 18.0, a2, sign)),
+                                   rtol=1e-10)
+
+
+def test_derivatives_of_a_root_match_finite_differences():
+    c = _coefficients(4)
+
+    def x_of(c, hopf=18.0):
+        return hz.position(15.0, -1.0, hopf, 14.0, c) + hz.position(16.0, 1.0, hopf, 14.0, c)
+
+    grad = np.asarray(jax.grad(x_of)(c))
+    h = 1e-6
+    for k in range(hz.N_BASIS):
+        d = np.zeros(hz.N_BASIS)
+        d[k] = h
+        fd = (float(x_of(c + d)) - float(x_of(c - d))) / (2 * h)
+        assert grad[k] == pytest.approx(fd, rel=1e-5, abs=1e-8)
+    g_hopf = float(jax.grad(x_of, argnums=1)(c, 18.0))
+    fd = (float(x_of(c, 18.0 + h)) - float(x_of(c, 18.0 - h))) / (2 * h)
+    assert g_hopf == pytest.approx(fd, rel=1e-5)
+
+
+def test_model_with_a_flat_discrepancy_is_the_linear_unfolding():
+    """log p of the model at ``z_h = 0`` is the linear model's plus the new sites' priors."""
+    import numpyro.distributions as dist
+    from numpyro.handlers import substitute, trace
+
+    from bayeshopf.features.frame import PlanarFrame
+    from bayeshopf.model import collapsed as cm
+
+    def spec(unfolding):
+        return cm.CollapsedSpec("subcritical", PlanarFrame(np.zeros(2), np.eye(2)), 2, 16.0,
+                                2.0, 15.0, 16.5, 1.0, cm.hidden_layer(4), unfolding=unfolding)
+
+    rng = np.random.default_rng(5)
+    mu = jnp.array([15.0, 15.6, 16.5, 17.0, 15.4, 16.5])
+    sign = jnp.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
+    y = jnp.asarray(rng.standard_normal((6, 2, 5)) * 0.3)
+    se = jnp.full((6, 2, 5), 0.02)
+    shared = {"gap_fold": 0.4, "gap_hopf": 0.7, "tau_mu": 0.2, "tau_shape": 0.1,
+              "sigma": jnp.array([0.01, 0.02]), "sigma_rel": 0.01}
+    extra = {"eta_h": 0.3, "ell_h": 0.6, "z_h": jnp.zeros(hz.N_BASIS)}
+
+    def log_joint(unfolding, values):
+        tr = trace(substitute(cm.collapsed_model, data=values)).get_trace(
+            spec(unfolding), mu, sign, y, se)
+        # numpyro.factor is a sample site of a unit distribution whose log_prob is the factor
+        return sum(float(jnp.sum(s["fn"].log_prob(s["value"]))) for s in tr.values()
+                   if s["type"] == "sample"), tr
+
+    lin, tr_lin = log_joint("linear", shared)
+    hor, tr_hor = log_joint("horizontal", {**shared, **extra})
+    priors = (float(dist.HalfNormal(hz.ETA_PRIOR).log_prob(0.3))
+              + float(dist.LogNormal(np.log(hz.LENGTH_PRIOR[0]), hz.LENGTH_PRIOR[1])
+                      .log_prob(0.6))
+              + float(jnp.sum(dist.Normal(0.0, 1.0).log_prob(jnp.zeros(hz.N_BASIS)))))
+    assert hor == pytest.approx(lin + priors, rel=1e-10)
+    assert float(tr_hor["a2"]["value"]) == pytest.approx(float(tr_lin["a2"]["value"]), rel=1e-12)
+
+
+def test_a_fit_with_it_predicts_saves_and_loads(tmp_path):
+    """The front door with ``unfolding="horizontal"``: diagram, predictions, a saved fit."""
+    from dataclasses import replace
+
+    import bayeshopf as bh
+    from bayeshopf.data.synthetic import demo_system
+
+    rs, truth = demo_system(seed=0, fast=True)
+    fit = bh.fit(rs, replace(bh.Settings.fast(), unfolding="horizontal"), seed=0,
+                 progress=False)
+    assert fit.interval("eta_h") is not None and fit.interval("w_unfold") is None
+    d = fit.diagram()
+    assert d.mu_fold.lo < d.mu_fold.hi < d.mu0.lo < d.mu0.hi
+    assert np.isfinite(d.fold_amplitude.lo)
+    a = fit.predict([15.5, 16.0], branch="unstable")
+    assert np.all(np.isfinite(a.amplitude.values))
+    fit.save(tmp_path / "fit", recordings=rs)
+    b = bh.load_fit(tmp_path / "fit").predict([15.5, 16.0], branch="unstable")
+    np.testing.assert_allclose(b.amplitude.values, a.amplitude.values, rtol=1e-9)
