@@ -29,7 +29,8 @@ For μ0 and the fold it records the 90% interval, whether it holds the truth, an
 the interval score ``(hi − lo) + 20·dist(truth, [lo, hi])`` (Gneiting & Raftery
 2007; the proper score of a central 90% interval). One JSON line per (seed,
 design, model) is appended to ``benchmarks/results/discrepancy_coverage.jsonl``;
-a rerun skips what is there.
+a rerun skips what is there (with each fit's divergent transitions and leapfrog
+steps). ``BENCH_PROGRESS=1`` shows each fit's stages as they run.
 """
 
 import json

@@ -35,9 +35,10 @@ safeguarded by a bracket, then one more for the derivatives), its radius
 ``c_k = z_k √S(ω_k)``, ``z_k ~ N(0, 1)`` sampled (non-centred),
 ``S(ω) = η_h² √(2π) ℓ_h e^{−ℓ_h² ω²/2}`` the squared exponential's
 spectral density. With few basis functions it is a smooth process of its own:
-within 3% of the squared exponential's covariance for ``ℓ_h ≤ ½`` on
+close to the squared exponential's covariance at ``ℓ_h = ½`` on
 ``x ∈ [0, 1.2]`` (the unstable branch and the stable one up to a little
-above the Hopf point), smoother for shorter lengths, and pulled to 0 (the
+above the Hopf point; ``tests/test_horizontal.py``), without its higher
+frequencies at shorter lengths (so smoother than it), and pulled to 0 (the
 normal form's curvature) towards ``|x| = L``.
 
 **Priors** (stated, informative): ``η_h ~ HalfNormal(`` :data:`ETA_PRIOR` ``)``

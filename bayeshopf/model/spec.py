@@ -44,8 +44,8 @@ class CollapsedSpec:
         mu_units: Unit of μ.
         unfolding: ``"linear"`` (the paper's ``μ − μ0``), ``"curved"``
             (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior)
-            or ``"horizontal"`` (the linear one plus a Gaussian process along
-            the diagram's curve, :mod:`bayeshopf.model.horizontal`).
+            or ``"horizontal"`` (the diagram's curve with a Gaussian process in
+            its curvature, :mod:`bayeshopf.model.horizontal`).
         omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
             ``None`` for a model without the frequency.
         control_scale: Prior sd of the control's gain ``h`` (frame units per
