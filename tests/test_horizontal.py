@@ -76,6 +76,7 @@ def test_without_discrepancy_the_curve_is_the_normal_form():
 def test_derivatives_of_a_root_match_finite_differences():
     c = _coefficients(4)
 
+    @jax.jit
     def x_of(c, hopf=18.0):
         return hz.position(15.0, -1.0, hopf, 14.0, c) + hz.position(16.0, 1.0, hopf, 14.0, c)
 
@@ -137,14 +138,16 @@ def test_a_fit_with_it_predicts_saves_and_loads(tmp_path):
     from bayeshopf.data.synthetic import demo_system
 
     rs, truth = demo_system(seed=0, fast=True)
-    fit = bh.fit(rs, replace(bh.Settings.fast(), unfolding="horizontal"), seed=0,
-                 progress=False)
+    # the wiring, not the statistics: one short chain
+    settings = replace(bh.Settings.fast(), unfolding="horizontal", num_chains=1,
+                       num_warmup=100, num_samples=100, max_samples=100)
+    fit = bh.fit(rs, settings, seed=0, progress=False)
     assert fit.interval("eta_h") is not None and fit.interval("w_unfold") is None
     d = fit.diagram()
     assert d.mu_fold.lo < d.mu_fold.hi < d.mu0.lo < d.mu0.hi
     assert np.isfinite(d.fold_amplitude.lo)
     a = fit.predict([15.5, 16.0], branch="unstable")
     assert np.all(np.isfinite(a.amplitude.values))
-    fit.save(tmp_path / "fit", recordings=rs)
+    fit.save(tmp_path / "fit", figures=False)
     b = bh.load_fit(tmp_path / "fit").predict([15.5, 16.0], branch="unstable")
     np.testing.assert_allclose(b.amplitude.values, a.amplitude.values, rtol=1e-9)
