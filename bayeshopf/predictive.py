@@ -143,7 +143,7 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     """
     ensure_x64()
     mu = np.atleast_1d(np.asarray(mu, dtype=float))
-    th = {k: jnp.asarray(v) for k, v in theta.items() if np.ndim(v) == 1 or k == "h_coef"}
+    th = {k: jnp.asarray(v) for k, v in theta.items()}
     om = np.asarray(compiled_call(
         "frequency-grid", lambda: lambda *a: _frequency_grid(spec, *a),
         (th, jnp.asarray(gammas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))

@@ -156,15 +156,16 @@ def position(mu, sign, mu_hopf, mu_fold, c):
     direction = jnp.where(stable, 1.0, -1.0)            # H rises on the stable side
     x0 = jnp.clip(0.5 + direction * 0.5 * jnp.sqrt(jnp.maximum(v, 0.0)), lo, hi)
 
+    n = _norm(c)                                         # the same at every step
+
     def g(x):
         m, dm = _moments(x, c)
-        n = _norm(c)
         return direction * (m / n - v), direction * dm / n
 
     xb = jax.lax.stop_gradient(_root(g, lo, hi, x0))
-    fp = slope(xb, c)
+    h, fp = (m / n for m in _moments(xb, c))
     safe = jnp.abs(fp) > 1e-12
-    x = xb - jnp.where(safe, (curve(xb, c) - v) / jnp.where(safe, fp, 1.0), 0.0)
+    x = xb - jnp.where(safe, (h - v) / jnp.where(safe, fp, 1.0), 0.0)
     ok = (v >= -1e-12) & (stable | (v <= 1.0 + 1e-12))
     return jnp.where(ok, x, jnp.nan)
 
