@@ -65,7 +65,8 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "kernel_plain": dict(discrepancy=False, nn_width=None),
           "kernel_scale": dict(discrepancy=True, nn_width=None, nn_mu_scale=None),
           "kernel_nu3": dict(discrepancy=True, nn_width=None, nn_mu_scale=3.0),
-          "kernel_h": dict(discrepancy=True, nn_width=None, unfolding="horizontal")}
+          "kernel_h": dict(discrepancy=True, nn_width=None, unfolding="horizontal"),
+          "kernel_w": dict(discrepancy=True, nn_width=None, unfolding="window")}
 NOISE = 0.015
 ALPHA = 0.1
 
@@ -99,7 +100,7 @@ def fit_one(rs, model: str) -> dict:
                       progress=bool(os.environ.get("BENCH_PROGRESS")))
     out = {"wall_s": time.perf_counter() - t0, "warnings": post.diagnostics["warnings"],
            "divergences": int(post.run.divergences), "sampler": post.run.sampler}
-    for k in ("mu0", "mu_fold", "eta", "sigma_rel", "eta_h", "ell_h"):
+    for k in ("mu0", "mu_fold", "eta", "sigma_rel", "eta_h", "ell_h", "depth_h", "width_h"):
         iv = post.interval(k)
         if iv is not None:
             out[k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}

@@ -1,7 +1,7 @@
 """Leave-one-out on the wind-tunnel rig: coverage, width and log predictive density.
 
 Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--discrepancy]
-[--floor K] [--nn-width H|inf] [--learn-mu-scale]``.
+[--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U]``.
 Each of the rig's 7 recordings is held out in turn, the model refitted on the
 others (seed 0) and the held-out amplitude predicted with its 90% band
 (``bayeshopf.validation.leave_one_out``, the refits kept). The log predictive
@@ -46,6 +46,8 @@ def main(argv):
         settings = replace(settings, nn_width=None if w == "inf" else int(w))
     if "--learn-mu-scale" in argv:
         settings = replace(settings, nn_mu_scale=None)
+    if "--unfolding" in argv:
+        settings = replace(settings, unfolding=argv[argv.index("--unfolding") + 1])
     if "--floor" in argv:
         settings = replace(settings, discrepancy_floor=float(argv[argv.index("--floor") + 1]))
     rs = load_recordings(RIG)

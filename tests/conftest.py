@@ -25,6 +25,11 @@ def _pin_xdist_worker() -> None:
 
 
 _pin_xdist_worker()
+# as the CLI runs (bayeshopf.cli.main): Equinox's run-time checks give NaN, which every
+# solve here reads from its result code, so the orbits' programs hold no host callback
+# and the persistent compilation cache can share them between the workers and the CLI
+# processes the tests start
+os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 from bayeshopf._x64 import ensure_x64  # noqa: E402  (after the pinning: it imports JAX)
 from bayeshopf.inference.cache import configure_xla_cpu  # noqa: E402

@@ -1,4 +1,5 @@
-"""The horizontal discrepancy's curve against SciPy's root finds and the closed form."""
+"""The horizontal discrepancy's curve (a Gaussian process in its curvature, or a window at
+the fold) against SciPy's quadrature and root finds, and the closed form."""
 
 import jax
 import jax.numpy as jnp
@@ -43,6 +44,17 @@ def _curve_by_quad(c):
     return lambda x: quad(lambda t: (x - t) * np.exp(e(t)), 0.5, x, epsabs=1e-14)[0] / norm
 
 
+def _check_roots(H, c, mus, hopf=18.0, fold=14.0):
+    """The module's roots of ``H(x) = (μ − μ_SN)/Δ`` against ``brentq`` on both branches."""
+    for mu in mus:
+        v = (mu - fold) / (hopf - fold)
+        x_s = brentq(lambda t, v=v: H(t) - v, 0.5, 4.0, xtol=1e-14)
+        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=1e-8)
+        if mu < hopf:
+            x_u = brentq(lambda t, v=v: H(t) - v, 0.0, 0.5, xtol=1e-14)
+            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=1e-8)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_curve_and_roots_match_scipy(seed):
     c = _coefficients(seed)
@@ -50,14 +62,8 @@ def test_curve_and_roots_match_scipy(seed):
     for x in (0.0, 0.2, 0.5, 0.9, 1.6):
         assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
     assert H(0.0) == pytest.approx(1.0, abs=1e-12)
+    _check_roots(H, c, (14.3, 15.5, 17.2, 17.95, 19.0))
     hopf, fold = 18.0, 14.0
-    for mu in (14.3, 15.5, 17.2, 17.95, 19.0):
-        v = (mu - fold) / (hopf - fold)
-        x_s = brentq(lambda t, v=v: H(t) - v, 0.5, 4.0, xtol=1e-14)
-        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=1e-8)
-        if mu < hopf:
-            x_u = brentq(lambda t, v=v: H(t) - v, 0.0, 0.5, xtol=1e-14)
-            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=1e-8)
     # no limit cycle below the fold; no unstable one above the Hopf point
     assert np.isnan(float(hz.position(13.9, 1.0, hopf, fold, c)))
     assert np.isnan(float(hz.position(18.1, -1.0, hopf, fold, c)))
@@ -92,36 +98,38 @@ def test_derivatives_of_a_root_match_finite_differences():
     assert g_hopf == pytest.approx(fd, rel=1e-5)
 
 
-def test_model_with_a_flat_discrepancy_is_the_linear_unfolding():
-    """log p of the model at ``z_h = 0`` is the linear model's plus the new sites' priors."""
-    import numpyro.distributions as dist
+def _log_joint(unfolding, extra=None):
+    """log p of the collapsed model on a small data set, at fixed values of its sites.
+
+    ``numpyro.factor`` is a sample site of a unit distribution whose log_prob is the
+    factor, so the sum over sample sites is the log joint.
+    """
     from numpyro.handlers import substitute, trace
 
     from bayeshopf.features.frame import PlanarFrame
     from bayeshopf.model import collapsed as cm
 
-    def spec(unfolding):
-        return cm.CollapsedSpec("subcritical", PlanarFrame(np.zeros(2), np.eye(2)), 2, 16.0,
-                                2.0, 15.0, 16.5, 1.0, cm.hidden_layer(4), unfolding=unfolding)
-
+    spec = cm.CollapsedSpec("subcritical", PlanarFrame(np.zeros(2), np.eye(2)), 2, 16.0,
+                            2.0, 15.0, 16.5, 1.0, cm.hidden_layer(4), unfolding=unfolding)
     rng = np.random.default_rng(5)
     mu = jnp.array([15.0, 15.6, 16.5, 17.0, 15.4, 16.5])
     sign = jnp.array([1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
     y = jnp.asarray(rng.standard_normal((6, 2, 5)) * 0.3)
     se = jnp.full((6, 2, 5), 0.02)
-    shared = {"gap_fold": 0.4, "gap_hopf": 0.7, "tau_mu": 0.2, "tau_shape": 0.1,
-              "sigma": jnp.array([0.01, 0.02]), "sigma_rel": 0.01}
-    extra = {"eta_h": 0.3, "ell_h": 0.6, "z_h": jnp.zeros(hz.N_BASIS)}
+    values = {"gap_fold": 0.4, "gap_hopf": 0.7, "tau_mu": 0.2, "tau_shape": 0.1,
+              "sigma": jnp.array([0.01, 0.02]), "sigma_rel": 0.01, **(extra or {})}
+    tr = trace(substitute(cm.collapsed_model, data=values)).get_trace(spec, mu, sign, y, se)
+    return sum(float(jnp.sum(s["fn"].log_prob(s["value"]))) for s in tr.values()
+               if s["type"] == "sample"), tr
 
-    def log_joint(unfolding, values):
-        tr = trace(substitute(cm.collapsed_model, data=values)).get_trace(
-            spec(unfolding), mu, sign, y, se)
-        # numpyro.factor is a sample site of a unit distribution whose log_prob is the factor
-        return sum(float(jnp.sum(s["fn"].log_prob(s["value"]))) for s in tr.values()
-                   if s["type"] == "sample"), tr
 
-    lin, tr_lin = log_joint("linear", shared)
-    hor, tr_hor = log_joint("horizontal", {**shared, **extra})
+def test_model_with_a_flat_discrepancy_is_the_linear_unfolding():
+    """log p of the model at ``z_h = 0`` is the linear model's plus the new sites' priors."""
+    import numpyro.distributions as dist
+
+    lin, tr_lin = _log_joint("linear")
+    hor, tr_hor = _log_joint("horizontal", {"eta_h": 0.3, "ell_h": 0.6,
+                                            "z_h": jnp.zeros(hz.N_BASIS)})
     priors = (float(dist.HalfNormal(hz.ETA_PRIOR).log_prob(0.3))
               + float(dist.LogNormal(np.log(hz.LENGTH_PRIOR[0]), hz.LENGTH_PRIOR[1])
                       .log_prob(0.6))
@@ -130,8 +138,11 @@ def test_model_with_a_flat_discrepancy_is_the_linear_unfolding():
     assert float(tr_hor["a2"]["value"]) == pytest.approx(float(tr_lin["a2"]["value"]), rel=1e-12)
 
 
-def test_a_fit_with_it_predicts_saves_and_loads(tmp_path):
-    """The front door with ``unfolding="horizontal"``: diagram, predictions, a saved fit."""
+# the Gaussian process's fit compiles a larger program than the window's: slow
+@pytest.mark.parametrize(("unfolding", "site"), [
+    ("window", "depth_h"), pytest.param("horizontal", "eta_h", marks=pytest.mark.slow)])
+def test_a_fit_with_it_predicts_saves_and_loads(tmp_path, unfolding, site):
+    """The front door with a horizontal unfolding: diagram, predictions, a saved fit."""
     from dataclasses import replace
 
     import bayeshopf as bh
@@ -139,10 +150,10 @@ def test_a_fit_with_it_predicts_saves_and_loads(tmp_path):
 
     rs, truth = demo_system(seed=0, fast=True)
     # the wiring, not the statistics: one short chain
-    settings = replace(bh.Settings.fast(), unfolding="horizontal", num_chains=1,
+    settings = replace(bh.Settings.fast(), unfolding=unfolding, num_chains=1,
                        num_warmup=100, num_samples=100, max_samples=100)
     fit = bh.fit(rs, settings, seed=0, progress=False)
-    assert fit.interval("eta_h") is not None and fit.interval("w_unfold") is None
+    assert fit.interval(site) is not None and fit.interval("w_unfold") is None
     d = fit.diagram()
     assert d.mu_fold.lo < d.mu_fold.hi < d.mu0.lo < d.mu0.hi
     assert np.isfinite(d.fold_amplitude.lo)
@@ -151,3 +162,62 @@ def test_a_fit_with_it_predicts_saves_and_loads(tmp_path):
     fit.save(tmp_path / "fit", figures=False)
     b = bh.load_fit(tmp_path / "fit").predict([15.5, 16.0], branch="unstable")
     np.testing.assert_allclose(b.amplitude.values, a.amplitude.values, rtol=1e-9)
+
+
+# ------------------------------------------------------------ the window at the fold
+
+
+def _window_by_quad(depth, width):
+    """``H`` with ``e(t) = −A exp(−(t − ½)²/2λ²)`` by SciPy's quadrature, written apart."""
+    def e(t):
+        return -depth * np.exp(-0.5 * ((t - 0.5) / width) ** 2)
+
+    norm = quad(lambda t: t * np.exp(e(t)), 0.0, 0.5, epsabs=1e-14)[0]
+    return lambda x: quad(lambda t: (x - t) * np.exp(e(t)), 0.5, x, epsabs=1e-14,
+                          points=[0.5])[0] / norm
+
+
+@pytest.mark.parametrize(("depth", "width"), [(3.0, 0.1), (-1.5, 0.25), (1.0, 0.07)])
+def test_window_curve_and_roots_match_scipy(depth, width):
+    c = jnp.array([depth, width])
+    H = _window_by_quad(depth, width)
+    for x in (0.0, 0.3, 0.45, 0.5, 0.62, 1.3):
+        assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
+    _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0))
+
+
+def test_a_deep_window_flattens_the_fold():
+    """A flatter fold: just above it the branches lie further apart than the normal form's."""
+    v = 0.01                                               # 1% of the gap above the fold
+    nf = 0.5 * np.sqrt(v)                                  # |x − ½| of 4(x − ½)² = v
+    flat = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([3.0, 0.1]))) - 0.5
+    sharp = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([-2.0, 0.1]))) - 0.5
+    assert sharp < nf < flat
+    assert flat > 2 * nf
+
+
+def test_window_derivatives_match_finite_differences():
+    @jax.jit
+    def x_of(c):
+        return hz.position(14.5, -1.0, 18.0, 14.0, c) + hz.position(16.0, 1.0, 18.0, 14.0, c)
+
+    c = jnp.array([1.2, 0.12])
+    grad = np.asarray(jax.grad(x_of)(c))
+    h = 1e-6
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = h
+        fd = (float(x_of(c + d)) - float(x_of(c - d))) / (2 * h)
+        assert grad[k] == pytest.approx(fd, rel=1e-5, abs=1e-8)
+
+
+def test_model_with_a_window_of_no_depth_is_the_linear_unfolding():
+    """log p at ``A = 0`` is the linear model's plus the window's priors."""
+    import numpyro.distributions as dist
+
+    lin, _ = _log_joint("linear")
+    win, _ = _log_joint("window", {"depth_h": 0.0, "width_h": 0.2})
+    priors = (float(dist.Normal(0.0, hz.WINDOW_DEPTH_PRIOR).log_prob(0.0))
+              + float(dist.LogNormal(np.log(hz.WINDOW_WIDTH_PRIOR[0]), hz.WINDOW_WIDTH_PRIOR[1])
+                      .log_prob(0.2)))
+    assert win == pytest.approx(lin + priors, rel=1e-10)

@@ -57,6 +57,8 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
         if spec.unfolding == "horizontal":
             v.update(eta_h=0.5 * hz.ETA_PRIOR, ell_h=hz.LENGTH_PRIOR[0],
                      z_h=np.zeros(hz.N_BASIS))
+        if spec.unfolding == "window":
+            v.update(depth_h=0.0, width_h=hz.WINDOW_WIDTH_PRIOR[0])
     else:
         v["kappa"] = 0.3 / spec.mu_span
     return {k: jnp.asarray(x, dtype=float) for k, x in v.items()}

@@ -46,9 +46,11 @@ class CollapsedSettings:
         nn_seed: Seed of the network's fixed hidden layer (a draw from its
             prior, :func:`~bayeshopf.model.collapsed.hidden_layer`; refit with
             others to see what the draw decides); unused at infinite width.
-        unfolding: ``"curved"`` (default), ``"linear"`` (the paper's ``μ − μ0``)
-            or ``"horizontal"`` (the curve in μ with a Gaussian process in its
-            curvature, :mod:`bayeshopf.model.horizontal`; subcritical only).
+        unfolding: ``"curved"`` (default), ``"linear"`` (the paper's ``μ − μ0``),
+            ``"horizontal"`` (the curve in μ with a Gaussian process in its
+            curvature) or ``"window"`` (that curve with a window of learned depth
+            and width in its curvature at the fold; both
+            :mod:`bayeshopf.model.horizontal`, subcritical only).
         inference: ``"nuts"`` (default) or ``"svi"``.
         num_chains: NUTS chains.
         num_warmup: NUTS warm-up steps per chain.
@@ -169,8 +171,8 @@ def build_spec(features: HarmonicFeatures, criticality: str, *, nn_width: int | 
     """
     if criticality not in ("subcritical", "supercritical"):
         raise FitError(f"criticality must be 'subcritical' or 'supercritical'; got {criticality!r}")
-    if unfolding not in ("curved", "linear", "horizontal"):
-        raise FitError("unfolding must be 'curved', 'linear' or 'horizontal'; got "
+    if unfolding not in ("curved", "linear", "horizontal", "window"):
+        raise FitError("unfolding must be 'curved', 'linear', 'horizontal' or 'window'; got "
                        f"{unfolding!r}")
     mu = features.mu
     if np.unique(mu).size < 2:

@@ -5,8 +5,8 @@
 :mod:`~bayeshopf.model.marginal` (the collapsed Gaussian),
 :mod:`~bayeshopf.model.frequency` (the phase speed),
 :mod:`~bayeshopf.model.discrepancy` (the model discrepancy),
-:mod:`~bayeshopf.model.horizontal` (an experiment: the diagram's curve with a Gaussian
-process in its curvature),
+:mod:`~bayeshopf.model.horizontal` (experiments: the diagram's curve with a Gaussian
+process in its curvature, or with a window in its curvature at the fold),
 :mod:`~bayeshopf.model.network_kernel` (the map's network at infinite width),
 :mod:`~bayeshopf.model.extrapolation` (the extra model error away from the recordings of
 the model without the discrepancy),

@@ -347,6 +347,8 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
         theta = {"mu0": mu0, "mu_fold": mu_fold}
         if spec.unfolding == "horizontal":
             return {**theta, **hz.sites(mu0, mu_fold)}
+        if spec.unfolding == "window":
+            return {**theta, **hz.window_sites(mu0, mu_fold)}
         if spec.unfolding == "curved":
             w = numpyro.sample("w_unfold", dist.Normal(0.0, UNFOLDING_PRIOR_SD))
             theta["w_unfold"] = w

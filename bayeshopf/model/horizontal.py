@@ -44,6 +44,21 @@ normal form's curvature) towards ``|x| = L``.
 **Priors** (stated, informative): ``η_h ~ HalfNormal(`` :data:`ETA_PRIOR` ``)``
 (the log of the curvature), ``ℓ_h ~ LogNormal`` (:data:`LENGTH_PRIOR`, in units
 of ``x``: the unstable branch spans ``[0, ½]``).
+
+**The window at the fold** (``unfolding="window"``, :func:`window_sites`). The
+same curve with the log curvature
+
+.. math::  e(x) = -A\,e^{-(x - 1/2)^2/2λ^2},
+
+a window of depth ``A`` and width ``λ`` at the fold. The normal form's fold is
+quadratic, but how far from the fold the quadratic law holds is not something
+recordings above the fold can see: a fold near a degenerate one (the two branches
+meeting with a higher-order contact) holds it only very close to the fold,
+and extrapolating the recorded pairs with the normal form's curvature then puts
+the fold too low. ``A > 0`` is such a flatter fold (the branches stay apart
+closer to it and meet abruptly), ``A < 0`` a sharper one, ``A = 0`` the normal
+form. Priors (stated): ``A ~ N(0,`` :data:`WINDOW_DEPTH_PRIOR` ``²)``,
+``λ ~ LogNormal`` (:data:`WINDOW_WIDTH_PRIOR`, in units of ``x``).
 """
 
 from __future__ import annotations
@@ -86,8 +101,23 @@ def _phases(x):
 
 
 def discrepancy(x, c):
-    """``e(x)`` for ``x`` (...) and coefficients ``c`` (..., m), broadcasting."""
+    """``e(x)`` for ``x`` (...) and coefficients ``c`` (..., m), broadcasting.
+
+    ``m = 2`` is the window at the fold, ``e(x) = −A e^{−(x−½)²/2λ²}`` with
+    ``c = (A, λ)``; otherwise ``c`` holds the reduced-rank process's ``c_k``
+    (:data:`N_BASIS` of them).
+    """
+    if jnp.shape(c)[-1] == 2:
+        a, lam = c[..., 0], c[..., 1]
+        return -a * jnp.exp(-0.5 * ((jnp.asarray(x) - 0.5) / lam) ** 2)
     return jnp.sum(jnp.sin(_phases(x)) * c, axis=-1) / np.sqrt(HALF_WIDTH)
+
+
+def _bound(c):
+    """A bound of ``|e|``."""
+    if jnp.shape(c)[-1] == 2:
+        return jnp.abs(c[..., 0])
+    return jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
 
 
 def _nodes():
@@ -149,7 +179,7 @@ def position(mu, sign, mu_hopf, mu_fold, c):
     v = jnp.broadcast_to((mu - mu_fold) / (mu_hopf - mu_fold), shape)
     stable = jnp.broadcast_to(sign, shape) > 0
     # H ≥ 4 e^{−2E} (x − ½)² with E ≥ |e|: a bracket of the stable root
-    e_abs = jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
+    e_abs = _bound(c)
     top = 0.5 + jnp.sqrt(jnp.maximum(v, 0.0) * jnp.exp(2.0 * e_abs) / 4.0) + 1e-9
     lo = jnp.where(stable, 0.5, 0.0)
     hi = jnp.where(stable, top, 0.5)
@@ -168,6 +198,26 @@ def position(mu, sign, mu_hopf, mu_fold, c):
     x = xb - jnp.where(safe, (h - v) / jnp.where(safe, fp, 1.0), 0.0)
     ok = (v >= -1e-12) & (stable | (v <= 1.0 + 1e-12))
     return jnp.where(ok, x, jnp.nan)
+
+
+#: Prior sd of the fold window's depth ``A`` (log of the curvature's drop at the fold).
+WINDOW_DEPTH_PRIOR = 2.0
+#: Log-normal prior of the window's width ``λ`` (median, log-sd), in units of ``x``.
+WINDOW_WIDTH_PRIOR = (0.15, 0.5)
+
+
+def window_sites(mu0, mu_fold) -> dict:
+    """The window's NumPyro sites, given the Hopf point and the fold.
+
+    Called by :func:`~bayeshopf.model.collapsed.normal_form_sites`: the depth
+    ``A`` (``depth_h``) and width ``λ`` (``width_h``) of the window at the fold;
+    then, as deterministic sites, ``h_coef = (A, λ)`` and ``a2 = 2√(μ0 − μ_SN)``.
+    """
+    a = numpyro.sample("depth_h", dist.Normal(0.0, WINDOW_DEPTH_PRIOR))
+    lam = numpyro.sample("width_h", dist.LogNormal(np.log(WINDOW_WIDTH_PRIOR[0]),
+                                                   WINDOW_WIDTH_PRIOR[1]))
+    return {"h_coef": numpyro.deterministic("h_coef", jnp.stack([a, lam], axis=-1)),
+            "a2": numpyro.deterministic("a2", 2.0 * jnp.sqrt(mu0 - mu_fold))}
 
 
 def sites(mu0, mu_fold) -> dict:

@@ -44,8 +44,9 @@ class CollapsedSpec:
         mu_units: Unit of μ.
         unfolding: ``"linear"`` (the paper's ``μ − μ0``), ``"curved"``
             (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior)
-            or ``"horizontal"`` (the diagram's curve with a Gaussian process in
-            its curvature, :mod:`bayeshopf.model.horizontal`).
+            ``"horizontal"`` (the diagram's curve with a Gaussian process in
+            its curvature) or ``"window"`` (that curve with a window in its
+            curvature at the fold; both :mod:`bayeshopf.model.horizontal`).
         omega_centre: ``ω̄``, the mean measured angular frequency (rad/s), or
             ``None`` for a model without the frequency.
         control_scale: Prior sd of the control's gain ``h`` (frame units per
@@ -169,7 +170,7 @@ def unfolding(mu, mu0, w, mu_fold):
 def radius(spec: CollapsedSpec, mu, sign, theta: dict):
     """Normal-form LCO radius at μ (``nan`` where the branch does not exist).
 
-    With the horizontal discrepancy (``theta`` holds ``h_coef``), the root of
+    With a horizontal unfolding (``theta`` holds ``h_coef``), the root of
     its curve (:func:`~bayeshopf.model.horizontal.position`), ``r = √(a2 x)``.
     """
     a2, a4 = theta.get("a2", -1.0), theta.get("a4", -1.0)
