@@ -14,7 +14,8 @@ discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
 ``kernel_plain``: the same two with the map's network at infinite width,
 ``nn_width=None``; ``kernel_scale``: ``kernel`` with the network's input scale
 on μ learned; ``kernel_nu3``: that scale fixed at 3; ``kernel_h``: ``kernel`` with
-the horizontal discrepancy, ``unfolding="horizontal"``; every other setting the default):
+the horizontal discrepancy, ``unfolding="horizontal"``; ``kernel_w``: ``kernel`` with
+the window at the fold, ``unfolding="window"``; every other setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
