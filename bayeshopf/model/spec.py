@@ -43,7 +43,7 @@ class CollapsedSpec:
         mu_label: Name of μ.
         mu_units: Unit of μ.
         unfolding: ``"linear"`` (the paper's ``μ − μ0``), ``"curved"``
-            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior)
+            (:func:`unfolding`, one more parameter ``w`` with a unit-normal prior),
             ``"horizontal"`` (the diagram's curve with a Gaussian process in
             its curvature) or ``"window"`` (that curve with a window in its
             curvature at the fold; both :mod:`bayeshopf.model.horizontal`).
