@@ -44,15 +44,15 @@ def _curve_by_quad(c):
     return lambda x: quad(lambda t: (x - t) * np.exp(e(t)), 0.5, x, epsabs=1e-14)[0] / norm
 
 
-def _check_roots(H, c, mus, hopf=18.0, fold=14.0):
+def _check_roots(H, c, mus, hopf=18.0, fold=14.0, tol=1e-8):
     """The module's roots of ``H(x) = (μ − μ_SN)/Δ`` against ``brentq`` on both branches."""
     for mu in mus:
         v = (mu - fold) / (hopf - fold)
         x_s = brentq(lambda t, v=v: H(t) - v, 0.5, 4.0, xtol=1e-14)
-        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=1e-8)
+        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=tol)
         if mu < hopf:
             x_u = brentq(lambda t, v=v: H(t) - v, 0.0, 0.5, xtol=1e-14)
-            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=1e-8)
+            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=tol)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -177,13 +177,17 @@ def _window_by_quad(depth, width):
                           points=[0.5])[0] / norm
 
 
-@pytest.mark.parametrize(("depth", "width"), [(3.0, 0.1), (-1.5, 0.25), (1.0, 0.07)])
+@pytest.mark.parametrize(("depth", "width"),
+                         [(3.0, 0.1), (-1.5, 0.25), (1.0, 0.07), (12.0, 0.27), (14.0, 0.4)])
 def test_window_curve_and_roots_match_scipy(depth, width):
+    """Deep windows too: a fold far flatter than the normal form's, where the
+    stable root's bracket must not grow with ``e^{A}``."""
     c = jnp.array([depth, width])
     H = _window_by_quad(depth, width)
     for x in (0.0, 0.3, 0.45, 0.5, 0.62, 1.3):
         assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
-    _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0))
+    # a deep window spans e^{-A}: the Gauss–Legendre sums keep about 1e-7 in x
+    _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0), tol=1e-8 if depth < 10 else 1e-6)
 
 
 def test_a_deep_window_flattens_the_fold():

@@ -113,11 +113,19 @@ def discrepancy(x, c):
     return jnp.sum(jnp.sin(_phases(x)) * c, axis=-1) / np.sqrt(HALF_WIDTH)
 
 
-def _bound(c):
-    """A bound of ``|e|``."""
+def _reach(c):
+    """``(w, E)`` with ``e(t) ≥ −E`` for every ``t ≥ ½ + w``.
+
+    Then ``H(x) ≥ e^{−E}(x − ½ − w)²/(2n)`` there (``n`` the curve's
+    normaliser), so the stable root of ``H = v`` lies below
+    ``½ + w + √(2 e^{E} n v)``. The window: ``w = λ√(2 ln max(A, 1))``,
+    ``E = 1``; the process: ``w = 0`` and ``E`` a bound of ``|e|``.
+    """
     if jnp.shape(c)[-1] == 2:
-        return jnp.abs(c[..., 0])
-    return jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
+        a, lam = c[..., 0], c[..., 1]
+        return lam * jnp.sqrt(2.0 * jnp.log(jnp.maximum(a, 1.0))), jnp.ones_like(a)
+    e_abs = jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
+    return jnp.zeros_like(e_abs), e_abs
 
 
 def _nodes():
@@ -178,15 +186,13 @@ def position(mu, sign, mu_hopf, mu_fold, c):
     c = jnp.broadcast_to(c, shape + jnp.shape(c)[-1:])
     v = jnp.broadcast_to((mu - mu_fold) / (mu_hopf - mu_fold), shape)
     stable = jnp.broadcast_to(sign, shape) > 0
-    # H ≥ 4 e^{−2E} (x − ½)² with E ≥ |e|: a bracket of the stable root
-    e_abs = _bound(c)
-    top = 0.5 + jnp.sqrt(jnp.maximum(v, 0.0) * jnp.exp(2.0 * e_abs) / 4.0) + 1e-9
+    n = _norm(c)                                         # the same at every step
+    w, e_tail = _reach(c)                                # a bracket of the stable root
+    top = 0.5 + w + jnp.sqrt(2.0 * jnp.exp(e_tail) * n * jnp.maximum(v, 0.0)) + 1e-9
     lo = jnp.where(stable, 0.5, 0.0)
     hi = jnp.where(stable, top, 0.5)
     direction = jnp.where(stable, 1.0, -1.0)            # H rises on the stable side
     x0 = jnp.clip(0.5 + direction * 0.5 * jnp.sqrt(jnp.maximum(v, 0.0)), lo, hi)
-
-    n = _norm(c)                                         # the same at every step
 
     def g(x):
         m, dm = _moments(x, c)
