@@ -162,6 +162,11 @@ def test_a_fit_with_it_predicts_saves_and_loads(tmp_path, unfolding, site):
     fit.save(tmp_path / "fit", figures=False)
     b = bh.load_fit(tmp_path / "fit").predict([15.5, 16.0], branch="unstable")
     np.testing.assert_allclose(b.amplitude.values, a.amplitude.values, rtol=1e-9)
+    if unfolding == "window":
+        # the demo's fold is the normal form's: its window stays within the prior
+        window = fit.diagnostics.details["fit"]["fold_window"]
+        assert window["depth_in_prior_sds"] < window["limit_in_prior_sds"]
+        assert not [w for w in fit.diagnostics.warnings if "fold's window" in w]
 
 
 # ------------------------------------------------------------ the window at the fold
@@ -188,6 +193,20 @@ def test_window_curve_and_roots_match_scipy(depth, width):
         assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
     # a deep window spans e^{-A}: the Gauss–Legendre sums keep about 1e-7 in x
     _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0), tol=1e-8 if depth < 10 else 1e-6)
+
+
+def test_a_window_beyond_its_prior_is_reported():
+    """Two prior SDs of the depth is the limit, either way, with the fold's shape named."""
+    from bayeshopf.diagnostics.fit_checks import fold_window_check
+    from bayeshopf.diagnostics.summaries import Interval
+
+    width = Interval(0.25, 0.19, 0.32, 0.9)
+    record, line = fold_window_check(Interval(6.5, 4.3, 9.4, 0.9), width)
+    assert record["depth_in_prior_sds"] == pytest.approx(6.5 / hz.WINDOW_DEPTH_PRIOR)
+    assert "flatter" in line and "6.5 [4.3, 9.4]" in line
+    assert "sharper" in fold_window_check(Interval(-4.5, -6.0, -3.0, 0.9), width)[1]
+    assert fold_window_check(Interval(3.9, 1.0, 6.0, 0.9), width)[1] is None
+    assert fold_window_check(Interval(-3.9, -6.0, -1.0, 0.9), width)[1] is None
 
 
 def test_a_deep_window_flattens_the_fold():

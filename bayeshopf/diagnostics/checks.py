@@ -9,7 +9,8 @@ into one :class:`Check` per question a user asks of a fit:
 * ``orbits``: is every recording's posterior-median orbit within its error bar?
 * ``amplitudes``: is every measured amplitude inside its 90% predictive band?
 * ``model_error``: is the model error small against the measured spread and
-  the orbits' size?
+  the orbits' size (and, with the window at the fold, is its depth within
+  what its prior allows)?
 * ``frequency``: is every measured frequency inside its 90% predictive band
   (``None`` without the frequency model)?
 * ``leave_one_out``: the held-out check, when the fit ran one (else ``None``).
@@ -61,7 +62,7 @@ _PREFIXES = {
     "sampler": ("NUTS:", "SVI:"),
     "orbits": (": orbit error",),
     "amplitudes": ("measured amplitude outside",),
-    "model_error": ("model error of", "relative model error"),
+    "model_error": ("model error of", "relative model error", "the fold's window"),
     "frequency": ("measured frequency",),
     "leave_one_out": ("leave-one-out",),
 }

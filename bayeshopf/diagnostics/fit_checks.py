@@ -13,6 +13,7 @@ from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import CI, interval
 from bayeshopf.inference import nuts, optimum, svi
 from bayeshopf.model import collapsed as cm
+from bayeshopf.model import horizontal as hz
 
 #: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
 ORBIT_ERROR_MAX = 0.05
@@ -29,6 +30,10 @@ SIGMA_ORBIT_FRACTION = 0.01
 #: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
 #: harmonic).
 SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
+#: With the window at the fold (``unfolding="window"``): a posterior median of
+#: its depth ``|A|`` above this many prior SDs is reported as the recordings
+#: near the fold disagreeing with the normal form by more than its prior allows.
+WINDOW_DEPTH_SDS_MAX = 2.0
 
 
 def orbit_error_parts(model, data) -> np.ndarray:
@@ -57,6 +62,28 @@ def orbit_error_parts(model, data) -> np.ndarray:
 def harmonic_name(k: int) -> str:
     """``"the centre"``, ``"the fundamental"``, ``"harmonic k"``."""
     return {0: "the centre", 1: "the fundamental"}.get(k, f"harmonic {k}")
+
+
+def fold_window_check(depth, width) -> tuple[dict, str | None]:
+    """The window at the fold against its prior: the record and a warning line, if any.
+
+    ``depth`` and ``width``: :class:`~bayeshopf.diagnostics.summaries.Interval`
+    of ``A`` and ``λ``. Warns when ``|median A|`` exceeds
+    :data:`WINDOW_DEPTH_SDS_MAX` prior SDs (:data:`~bayeshopf.model.horizontal.WINDOW_DEPTH_PRIOR`).
+    """
+    sds = abs(depth.median) / hz.WINDOW_DEPTH_PRIOR
+    record = {"depth": depth.to_json(), "width": width.to_json(),
+              "depth_prior_sd": hz.WINDOW_DEPTH_PRIOR, "depth_in_prior_sds": sds,
+              "limit_in_prior_sds": WINDOW_DEPTH_SDS_MAX}
+    if sds <= WINDOW_DEPTH_SDS_MAX:
+        return record, None
+    shape = "flatter" if depth.median > 0 else "sharper"
+    return record, (
+        f"fit: the fold's window has depth {depth.median:.2g} [{depth.lo:.2g}, {depth.hi:.2g}], "
+        f"{sds:.1f} prior SDs from 0 (limit {WINDOW_DEPTH_SDS_MAX:g}): the recordings ask for "
+        f"a fold far {shape} than the normal form's, more than its prior allows; the Hopf "
+        "and fold intervals may miss (record closer to the fold, or check them by "
+        "leave-one-out: bayeshopf.validation.leave_one_out)")
 
 
 def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
@@ -121,6 +148,11 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
             "sigma_rel": post.interval("sigma_rel").to_json(),
             "relative": interval(total).to_json()}
         d["fit"]["sigma_rel"] = float(np.median(total))
+    if post.spec.unfolding == "window":
+        d["fit"]["fold_window"], line = fold_window_check(post.interval("depth_h"),
+                                                          post.interval("width_h"))
+        if line:
+            warnings.append(line)
     if post.spec.samples_nu_mu:
         d["fit"]["nn_mu_scale"] = post.interval("nu_mu").to_json()
     if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
