@@ -3,7 +3,8 @@
 Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs paired,short,sweep]
 [--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for chosen seeds); ``--summary
 [FIRST LAST] [--seeds …] [--models …]`` prints the table of what finished, over the
-sets that every listed model fitted, with each coverage's 90% Clopper–Pearson interval.
+sets that every listed model fitted, with each coverage's 90% Clopper–Pearson interval
+(and, with ``kernel_w``, the misses among the sets its fit's window check flags).
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
@@ -186,6 +187,32 @@ def summary(seeds=None, models=None) -> None:
                 cells += [f"{inside}/{len(sub)} ({lo:.2f}–{hi:.2f})", f"{width:.3f}",
                           f"{score:.3f}"]
             print(f"| {design} | {model} | {len(sub)} | " + " | ".join(cells) + " |")
+    flagged_misses(rows, models)
+
+
+def flagged_misses(rows, models) -> None:
+    """Misses among the window's fits the fit's check flags and among the rest.
+
+    The check: ``|median A|`` above
+    :data:`~bayeshopf.diagnostics.fit_checks.WINDOW_DEPTH_SDS_MAX` prior SDs
+    (:func:`~bayeshopf.diagnostics.fit_checks.fold_window_check`), read from
+    each row's ``depth_h``; over the sets every listed model fitted.
+    """
+    from bayeshopf.diagnostics.fit_checks import WINDOW_DEPTH_SDS_MAX
+    from bayeshopf.model.horizontal import WINDOW_DEPTH_PRIOR
+
+    if "kernel_w" not in models:
+        return
+    by = {(r["seed"], r["design"], r["model"]): r for r in rows}
+    sets = [k[:2] for k in by if k[2] == "kernel_w" and all(k[:2] + (m,) in by for m in models)]
+    for flag in (True, False):
+        sub = [by[s + ("kernel_w",)] for s in sorted(sets)
+               if (abs(by[s + ("kernel_w",)]["depth_h"]["median"])
+                   > WINDOW_DEPTH_SDS_MAX * WINDOW_DEPTH_PRIOR) == flag]
+        miss = {k: sum(not r[k]["inside"] for r in sub) for k in ("mu0", "mu_fold")}
+        names = ", ".join(f"{r['seed']}/{r['design']}" for r in sub) if flag else ""
+        print(f"kernel_w {'flagged' if flag else 'not flagged'}: {len(sub)} sets {names}; "
+              f"misses: μ0 {miss['mu0']}, fold {miss['mu_fold']}")
 
 
 def main(argv):

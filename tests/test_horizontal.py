@@ -44,15 +44,15 @@ def _curve_by_quad(c):
     return lambda x: quad(lambda t: (x - t) * np.exp(e(t)), 0.5, x, epsabs=1e-14)[0] / norm
 
 
-def _check_roots(H, c, mus, hopf=18.0, fold=14.0, tol=1e-8):
+def _check_roots(H, c, mus, hopf=18.0, fold=14.0, tol=1e-8, form="process"):
     """The module's roots of ``H(x) = (μ − μ_SN)/Δ`` against ``brentq`` on both branches."""
     for mu in mus:
         v = (mu - fold) / (hopf - fold)
         x_s = brentq(lambda t, v=v: H(t) - v, 0.5, 4.0, xtol=1e-14)
-        assert float(hz.position(mu, 1.0, hopf, fold, c)) == pytest.approx(x_s, abs=tol)
+        assert float(hz.position(mu, 1.0, hopf, fold, c, form)) == pytest.approx(x_s, abs=tol)
         if mu < hopf:
             x_u = brentq(lambda t, v=v: H(t) - v, 0.0, 0.5, xtol=1e-14)
-            assert float(hz.position(mu, -1.0, hopf, fold, c)) == pytest.approx(x_u, abs=tol)
+            assert float(hz.position(mu, -1.0, hopf, fold, c, form)) == pytest.approx(x_u, abs=tol)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -190,9 +190,15 @@ def test_window_curve_and_roots_match_scipy(depth, width):
     c = jnp.array([depth, width])
     H = _window_by_quad(depth, width)
     for x in (0.0, 0.3, 0.45, 0.5, 0.62, 1.3):
-        assert float(hz.curve(jnp.asarray(x), c)) == pytest.approx(H(x), abs=1e-9)
+        assert float(hz.curve(jnp.asarray(x), c, "window")) == pytest.approx(H(x), abs=1e-9)
     # a deep window spans e^{-A}: the Gauss–Legendre sums keep about 1e-7 in x
-    _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0), tol=1e-8 if depth < 10 else 1e-6)
+    _check_roots(H, c, (14.02, 14.3, 15.5, 17.95, 19.0), tol=1e-8 if depth < 10 else 1e-6,
+                 form="window")
+
+
+def test_an_unknown_form_is_refused():
+    with pytest.raises(ValueError, match="form: expected one of process, window; got 'gp'"):
+        hz.curve(0.3, jnp.array([1.0, 0.2]), "gp")
 
 
 def test_a_window_beyond_its_prior_is_reported():
@@ -213,8 +219,8 @@ def test_a_deep_window_flattens_the_fold():
     """A flatter fold: just above it the branches lie further apart than the normal form's."""
     v = 0.01                                               # 1% of the gap above the fold
     nf = 0.5 * np.sqrt(v)                                  # |x − ½| of 4(x − ½)² = v
-    flat = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([3.0, 0.1]))) - 0.5
-    sharp = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([-2.0, 0.1]))) - 0.5
+    flat = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([3.0, 0.1]), "window")) - 0.5
+    sharp = float(hz.position(14.04, 1.0, 18.0, 14.0, jnp.array([-2.0, 0.1]), "window")) - 0.5
     assert sharp < nf < flat
     assert flat > 2 * nf
 
@@ -222,7 +228,8 @@ def test_a_deep_window_flattens_the_fold():
 def test_window_derivatives_match_finite_differences():
     @jax.jit
     def x_of(c):
-        return hz.position(14.5, -1.0, 18.0, 14.0, c) + hz.position(16.0, 1.0, 18.0, 14.0, c)
+        return (hz.position(14.5, -1.0, 18.0, 14.0, c, "window")
+                + hz.position(16.0, 1.0, 18.0, 14.0, c, "window"))
 
     c = jnp.array([1.2, 0.12])
     grad = np.asarray(jax.grad(x_of)(c))

@@ -100,20 +100,30 @@ def _phases(x):
     return jnp.asarray(x)[..., None] * frequencies() + frequencies() * HALF_WIDTH
 
 
-def discrepancy(x, c):
+#: The forms of the log curvature: the reduced-rank process, the window at the fold.
+FORMS = ("process", "window")
+
+
+def _check(form: str) -> None:
+    if form not in FORMS:
+        raise ValueError(f"form: expected one of {', '.join(FORMS)}; got {form!r}")
+
+
+def discrepancy(x, c, form: str = "process"):
     """``e(x)`` for ``x`` (...) and coefficients ``c`` (..., m), broadcasting.
 
-    ``m = 2`` is the window at the fold, ``e(x) = −A e^{−(x−½)²/2λ²}`` with
-    ``c = (A, λ)``; otherwise ``c`` holds the reduced-rank process's ``c_k``
-    (:data:`N_BASIS` of them).
+    ``form="process"``: ``c`` holds the reduced-rank process's ``c_k``
+    (:data:`N_BASIS` of them); ``form="window"``: the window at the fold,
+    ``e(x) = −A e^{−(x−½)²/2λ²}`` with ``c = (A, λ)``.
     """
-    if jnp.shape(c)[-1] == 2:
+    _check(form)
+    if form == "window":
         a, lam = c[..., 0], c[..., 1]
         return -a * jnp.exp(-0.5 * ((jnp.asarray(x) - 0.5) / lam) ** 2)
     return jnp.sum(jnp.sin(_phases(x)) * c, axis=-1) / np.sqrt(HALF_WIDTH)
 
 
-def _reach(c):
+def _reach(c, form):
     """``(w, E)`` with ``e(t) ≥ −E`` for every ``t ≥ ½ + w``.
 
     Then ``H(x) ≥ e^{−E}(x − ½ − w)²/(2n)`` there (``n`` the curve's
@@ -121,7 +131,7 @@ def _reach(c):
     ``½ + w + √(2 e^{E} n v)``. The window: ``w = λ√(2 ln max(A, 1))``,
     ``E = 1``; the process: ``w = 0`` and ``E`` a bound of ``|e|``.
     """
-    if jnp.shape(c)[-1] == 2:
+    if form == "window":
         a, lam = c[..., 0], c[..., 1]
         return lam * jnp.sqrt(2.0 * jnp.log(jnp.maximum(a, 1.0))), jnp.ones_like(a)
     e_abs = jnp.sum(jnp.abs(c), axis=-1) / np.sqrt(HALF_WIDTH)
@@ -133,29 +143,34 @@ def _nodes():
     return 0.5 * (t + 1.0), 0.5 * w                       # on [0, 1]
 
 
-def _moments(x, c):
+def _moments(x, c, form):
     """``(∫_{½}^x (x−t) e^{e} dt, ∫_{½}^x e^{e} dt)`` by Gauss–Legendre, shape of ``x``."""
     u, w = _nodes()
     x = jnp.asarray(x)
     t = 0.5 + (x[..., None] - 0.5) * u                      # (..., n)
-    f = jnp.exp(discrepancy(t, c[..., None, :]))
+    f = jnp.exp(discrepancy(t, c[..., None, :], form))
     d = x - 0.5
     return d**2 * jnp.sum(w * (1.0 - u) * f, axis=-1), d * jnp.sum(w * f, axis=-1)
 
 
-def _norm(c):
+def _norm(c, form):
     """``∫_0^{½} t e^{e(t)} dt`` (``1/8`` for ``e ≡ 0``)."""
-    return _moments(jnp.zeros(jnp.shape(c)[:-1]), c)[0]
+    return _moments(jnp.zeros(jnp.shape(c)[:-1]), c, form)[0]
 
 
-def curve(x, c):
-    """``H(x)``: 0 at the fold ``x = ½``, 1 at the Hopf point ``x = 0``."""
-    return _moments(x, c)[0] / _norm(c)
+def curve(x, c, form: str = "process"):
+    """``H(x)``: 0 at the fold ``x = ½``, 1 at the Hopf point ``x = 0``.
+
+    ``form``: :data:`FORMS`.
+    """
+    _check(form)
+    return _moments(x, c, form)[0] / _norm(c, form)
 
 
-def slope(x, c):
-    """``H'(x)``."""
-    return _moments(x, c)[1] / _norm(c)
+def slope(x, c, form: str = "process"):
+    """``H'(x)`` (``form``: :data:`FORMS`)."""
+    _check(form)
+    return _moments(x, c, form)[1] / _norm(c, form)
 
 
 def _root(g, lo, hi, x0):
@@ -175,19 +190,20 @@ def _root(g, lo, hi, x0):
     return jax.lax.fori_loop(0, N_STEPS, step, (lo, hi, x0))[2]
 
 
-def position(mu, sign, mu_hopf, mu_fold, c):
+def position(mu, sign, mu_hopf, mu_fold, c, form: str = "process"):
     """``x`` of the limit cycle at μ on the branch ``sign`` (+1 stable), ``nan`` where none.
 
     ``mu`` and ``sign`` broadcast against the draws' leading shape of
-    ``mu_hopf``, ``mu_fold`` and ``c`` (..., m).
+    ``mu_hopf``, ``mu_fold`` and ``c`` (..., m); ``form``: :data:`FORMS`.
     """
+    _check(form)
     shape = jnp.broadcast_shapes(jnp.shape(mu), jnp.shape(sign), jnp.shape(mu_hopf),
                                  jnp.shape(c)[:-1])
     c = jnp.broadcast_to(c, shape + jnp.shape(c)[-1:])
     v = jnp.broadcast_to((mu - mu_fold) / (mu_hopf - mu_fold), shape)
     stable = jnp.broadcast_to(sign, shape) > 0
-    n = _norm(c)                                         # the same at every step
-    w, e_tail = _reach(c)                                # a bracket of the stable root
+    n = _norm(c, form)                                   # the same at every step
+    w, e_tail = _reach(c, form)                                # a bracket of the stable root
     top = 0.5 + w + jnp.sqrt(2.0 * jnp.exp(e_tail) * n * jnp.maximum(v, 0.0)) + 1e-9
     lo = jnp.where(stable, 0.5, 0.0)
     hi = jnp.where(stable, top, 0.5)
@@ -195,11 +211,11 @@ def position(mu, sign, mu_hopf, mu_fold, c):
     x0 = jnp.clip(0.5 + direction * 0.5 * jnp.sqrt(jnp.maximum(v, 0.0)), lo, hi)
 
     def g(x):
-        m, dm = _moments(x, c)
+        m, dm = _moments(x, c, form)
         return direction * (m / n - v), direction * dm / n
 
     xb = jax.lax.stop_gradient(_root(g, lo, hi, x0))
-    h, fp = (m / n for m in _moments(xb, c))
+    h, fp = (m / n for m in _moments(xb, c, form))
     safe = jnp.abs(fp) > 1e-12
     x = xb - jnp.where(safe, (h - v) / jnp.where(safe, fp, 1.0), 0.0)
     ok = (v >= -1e-12) & (stable | (v <= 1.0 + 1e-12))

@@ -175,7 +175,8 @@ def radius(spec: CollapsedSpec, mu, sign, theta: dict):
     """
     a2, a4 = theta.get("a2", -1.0), theta.get("a4", -1.0)
     if "h_coef" in theta:
-        x = horizontal.position(mu, sign, theta["mu0"], theta["mu_fold"], theta["h_coef"])
+        form = "window" if spec.unfolding == "window" else "process"
+        x = horizontal.position(mu, sign, theta["mu0"], theta["mu_fold"], theta["h_coef"], form)
         return jnp.sqrt(a2 * x)
     if "w_unfold" in theta:
         beta = unfolding(mu, theta["mu0"], theta["w_unfold"], theta["mu_fold"])
