@@ -10,7 +10,7 @@ the package does. Reports the draws per chain it ended with, R̂, ESS,
 divergences, the leapfrog steps (the cost, whatever the machine's load), the
 wall time of the posterior stage (its programs compiled before the timed runs)
 and the 90% intervals of μ0, a2 and μ_fold. Writes
-``benchmarks/chain_length.json``.
+``benchmarks/results/chain_length.json``.
 
 The sampler seeds 1–4 were used to choose nothing (the defaults were chosen on
 seed 0); this benchmark measures, it does not choose.
@@ -26,6 +26,7 @@ import numpy as np
 
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 LENGTHS = {"500+500": (500, 500), "250+250": (250, 250), "500+250": (500, 250)}
 
@@ -70,7 +71,7 @@ def main(seeds):
     from bayeshopf.inference.cache import configure_xla_cpu
 
     configure_xla_cpu(host_devices=2)
-    from _common import atomic_write, rig_recordings
+    from _common import rig_recordings
 
     from bayeshopf.inference.cache import enable_compilation_cache
     from bayeshopf.simulators.truth import flutter_experiment
@@ -78,7 +79,8 @@ def main(seeds):
     enable_compilation_cache()
     rows = case("rig", rig_recordings(), seeds)
     rows += case("demo", flutter_experiment(seed=0)[0], seeds)
-    atomic_write(HERE / "chain_length.json", json.dumps({"seeds": seeds, "rows": rows}, indent=1))
+    atomic_write(RESULTS_DIR / "chain_length.json",
+                 json.dumps({"seeds": seeds, "rows": rows}, indent=1))
     print("| case | length | draws per chain (by seed) | R̂ max | ESS min | posterior stage |")
     print("|---|---|---|---:|---:|---:|")
     for name in ("rig", "demo"):

@@ -1,6 +1,6 @@
 """Would an error of the recorded airspeed explain the rig's held-out misses?
 
-Run: ``python benchmarks/bench_loo_airspeed.py``. Writes ``benchmarks/loo_airspeed.json``
+Run: ``python benchmarks/bench_loo_airspeed.py``. Writes ``benchmarks/results/loo_airspeed.json``
 (7 fits, about 70 s on 2 cores).
 
 The rig's airspeed comes from the wind tunnel's control system, rounded to 0.1 m/s
@@ -36,10 +36,10 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write, rig_recordings
+from _common import RESULTS_DIR, atomic_write, rig_recordings
 
 HERE = Path(__file__).parent
-OUT = HERE / "loo_airspeed.json"
+OUT = RESULTS_DIR / "loo_airspeed.json"
 CI = 0.9
 #: Airspeed-error sds (m/s) of the held-out recording.
 SIGMAS = (0.0, 0.1 / np.sqrt(12.0), 0.05, 0.1, 0.15, 0.2)

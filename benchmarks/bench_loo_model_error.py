@@ -1,7 +1,7 @@
 """How large a model error away from the data the rig's leave-one-out bar needs, and what it costs.
 
 Run: ``python benchmarks/bench_loo_model_error.py [--nested | --nested-bayes]``. Writes
-``benchmarks/loo_model_error.json``.
+``benchmarks/results/loo_model_error.json``.
 
 The predictive band of a new recording includes a model error away from the
 recordings: its orbit is scaled by ``e^{δ}``, ``δ = s z c(μ)``, ``z ~ N(0, 1)``,
@@ -40,6 +40,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
+
 SCALES = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6)
 LEGACY_WIDTH = 0.0136          # m: the legacy core's mean held-out band (docs/changelog.md)
 CI = 0.9
@@ -108,7 +110,7 @@ def nested_bayes():
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference.collapsed import CollapsedSettings
 
-    out = json.loads((HERE / "loo_model_error.json").read_text())
+    out = json.loads((RESULTS_DIR / "loo_model_error.json").read_text())
     f = extract_harmonics(load_recordings(HERE.parent.parent / "shared/data/flutter_cbc"))
     n, rows = f.n_recordings, []
     for i, fold in enumerate(out["folds"]):
@@ -135,7 +137,7 @@ def nested_bayes():
                            "width_vs_legacy": width / LEGACY_WIDTH}
     print(f"nested, Bayesian: {inside}/{n}, mean width {1e3 * width:.1f} mm "
           f"({width / LEGACY_WIDTH:.2f} × legacy)")
-    (HERE / "loo_model_error.json").write_text(json.dumps(out, indent=1))
+    atomic_write(RESULTS_DIR / "loo_model_error.json", json.dumps(out, indent=1))
 
 
 def main(nested=False):
@@ -207,7 +209,7 @@ def main(nested=False):
         v = out["nested"]
         print(f"nested (s from the training folds): {v['inside']}/{n}, mean width "
               f"{1e3 * v['mean_width_m']:.1f} mm ({v['width_vs_legacy']:.2f} × legacy)")
-    (HERE / "loo_model_error.json").write_text(json.dumps(out, indent=1))
+    atomic_write(RESULTS_DIR / "loo_model_error.json", json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """The model error away from the data, calibrated on a class of simulated rigs instead of the rig.
 
 Run: ``python benchmarks/bench_loo_reference_class.py [--systems N] [--rig] [--effects]``. Writes
-``benchmarks/loo_reference_class.json`` (after every system, so a long run can be read as it goes);
+``benchmarks/results/loo_reference_class.json`` (after every system, so a long run can be read as
+it goes);
 ``--rig`` adds the same residuals of the rig's seven recordings to that file (7 more fits);
 ``--effects`` runs the class with missing physics instead (below), into
 ``benchmarks/results/loo_reference_class_effects.json``; ``--resume`` goes on after the last
@@ -103,7 +104,7 @@ from _common import RESULTS_DIR, atomic_write  # noqa: E402
 from bench_loo_model_error import SCALES, _band, _ml_scale, _residual  # noqa: E402
 
 HERE = Path(__file__).parent
-OUT = HERE / "loo_reference_class.json"
+OUT = RESULTS_DIR / "loo_reference_class.json"
 OUT_EFFECTS = RESULTS_DIR / "loo_reference_class_effects.json"
 FIRST_SEED_EFFECTS = 500
 OUT_EFFECTS_B = RESULTS_DIR / "loo_reference_class_effects_b.json"

@@ -3,7 +3,7 @@
 Run: ``python benchmarks/bench_nuts_mass.py``. From the same MAP point, 4
 sequential chains for each setting; reports the mean number of leapfrog steps
 per iteration (the cost, independent of the machine's load), R̂ and bulk ESS of
-μ0, a2, μ_fold and w. Writes ``benchmarks/nuts_mass.json``. The defaults of
+μ0, a2, μ_fold and w. Writes ``benchmarks/results/nuts_mass.json``. The defaults of
 :class:`~bayeshopf.inference.collapsed.CollapsedSettings` were chosen from this.
 """
 
@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 
 def main():
@@ -48,7 +49,7 @@ def main():
                          "sites": {k: {"r_hat": r, "ess_bulk": e}
                                    for k, (r, e) in rhat_ess(ch).items()}})
             print(rows[-1], flush=True)
-    (HERE / "nuts_mass.json").write_text(json.dumps(rows, indent=1))
+    atomic_write(RESULTS_DIR / "nuts_mass.json", json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ chain keys, 4 chains × (500 + 500) with a dense mass matrix: once started at th
 inverse Hessian of the potential at the MAP (the default), once at the identity.
 Reports the mean leapfrog steps per iteration in warm-up and in the draws (the
 cost, whatever the machine's load), divergences, R̂ and bulk ESS of μ0, a2,
-μ_fold and w, and the 90% intervals. Writes ``benchmarks/nuts_start.json``.
+μ_fold and w, and the 90% intervals. Writes ``benchmarks/results/nuts_start.json``.
 
 Both data sets were used to choose the core's settings (seed 0 and the rig);
 the calibration over seeds 100–119 (``bench_calibration_collapsed.py``) is the
@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 
 def case(name, recordings):
@@ -67,7 +68,7 @@ def main():
 
     rows = case("rig", load_recordings(HERE.parent.parent / "shared/data/flutter_cbc"))
     rows += case("demo (3-DOF, seed 0)", flutter_experiment(seed=0)[0])
-    (HERE / "nuts_start.json").write_text(json.dumps(rows, indent=1))
+    atomic_write(RESULTS_DIR / "nuts_start.json", json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

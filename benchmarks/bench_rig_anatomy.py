@@ -1,7 +1,7 @@
 """Where the rig's fit misses, and what drives its held-out failures.
 
 Run: ``python benchmarks/bench_rig_anatomy.py`` (20 s on 2 cores with a warm cache).
-Writes ``benchmarks/rig_anatomy.json``; ``docs/validation.md`` cites it. Five
+Writes ``benchmarks/results/rig_anatomy.json``; ``docs/validation.md`` quotes what it measures. Five
 parts, on the 7 recordings in ``../shared/data/flutter_cbc``, all without the
 control term (``CollapsedSettings(control=False)``: the model of stop 43, whose
 misses this benchmark takes apart; ``bench_rig_control.py`` adds the term):
@@ -43,6 +43,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
+
 DATA = HERE.parent.parent / "shared/data/flutter_cbc"
 
 
@@ -241,7 +243,7 @@ def main():
                        profile(f, "gap_fold", folds, None),
                        profile(f, "gap_hopf", hopfs, "CBC_unstable_v16_5.mat"),
                        profile(f, "gap_hopf", hopfs, None)]
-    (HERE / "rig_anatomy.json").write_text(json.dumps(out, indent=1))
+    atomic_write(RESULTS_DIR / "rig_anatomy.json", json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

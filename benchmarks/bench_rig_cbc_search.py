@@ -1,7 +1,7 @@
 """Two explanations of the rig's held-out unstable misses, checked against its own CBC data.
 
 Run: ``python benchmarks/bench_rig_cbc_search.py`` (a few seconds, no fit). Writes
-``benchmarks/rig_cbc_search.json``; ``docs/validation.md`` cites it.
+``benchmarks/results/rig_cbc_search.json``; ``docs/validation.md`` quotes what it measures.
 
 Held out, the unstable 14.9 and 16.5 m/s amplitudes lie below their bands, by
 log residuals of −0.21 and −0.42 (``loo_reference_class.json``, ``rig``). Two
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _common import CBC_DIR, atomic_write, rig_recordings  # noqa: E402
+from _common import CBC_DIR, RESULTS_DIR, atomic_write, rig_recordings  # noqa: E402
 
 HERE = Path(__file__).parent
 
@@ -72,7 +72,7 @@ def main():
     ratio = np.array([w["u_b_over_A"] for w in work])
     out = {"search": search, "control_work": work,
            "u_b_over_A_mean": float(ratio.mean()), "u_b_over_A_sd": float(ratio.std(ddof=1))}
-    atomic_write(HERE / "rig_cbc_search.json", json.dumps(out, indent=1))
+    atomic_write(RESULTS_DIR / "rig_cbc_search.json", json.dumps(out, indent=1))
     print(f"u_b/A: {ratio.mean():.4f} ± {ratio.std(ddof=1):.4f} V/m over the 7 recordings")
 
 

@@ -1,7 +1,7 @@
 """The rig's CBC control: what its residual fundamental is, and what the control term buys.
 
 Run: ``python benchmarks/bench_rig_control.py`` (about 1 min on 2 cores with a warm
-cache). Writes ``benchmarks/rig_control.json``; ``docs/validation.md`` cites it.
+cache). Writes ``benchmarks/results/rig_control.json``; ``docs/validation.md`` quotes what it measures.
 On the 7 recordings in ``../shared/data/flutter_cbc``:
 
 1. **The actuator command** (row 2 of ``data``, the rig description's control
@@ -42,6 +42,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).parent
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
+
 DATA = HERE.parent.parent / "shared/data/flutter_cbc"
 
 
@@ -185,7 +187,7 @@ def main():
     out["compare"] = {str(k): {c: float(cmp.loc[k, c]) for c in ("elpd_loo", "elpd_diff", "dse")}
                       for k in cmp.index}
     print(cmp[["elpd_loo", "elpd_diff", "dse"]])
-    (HERE / "rig_control.json").write_text(json.dumps(out, indent=1))
+    atomic_write(RESULTS_DIR / "rig_control.json", json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

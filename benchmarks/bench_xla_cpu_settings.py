@@ -17,7 +17,7 @@ that the machine's drift falls on all of them alike:
 - ``opt3_blas1``: level 3, one BLAS thread (what ``configure_xla_cpu`` sets);
 - ``opt1_blas_default``: level 1, OpenBLAS's default threads.
 
-Writes ``benchmarks/xla_cpu_settings.json`` (each row with the ``XLA_FLAGS``
+Writes ``benchmarks/results/xla_cpu_settings.json`` (each row with the ``XLA_FLAGS``
 and ``OPENBLAS_NUM_THREADS`` it ran with) and prints a Markdown table of the
 medians over rounds.
 """
@@ -34,6 +34,7 @@ from pathlib import Path
 
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
+from _common import RESULTS_DIR, atomic_write  # noqa: E402
 
 OPT1, OPT3 = "--xla_backend_optimization_level=1", "--xla_backend_optimization_level=3"
 CONFIGS = {             # "" → OpenBLAS's variable unset before scipy loads it
@@ -96,7 +97,7 @@ def main(rounds: int = 2) -> None:
             rows.append({"round": r, "config": name, "load_before": load,
                          **json.loads(res.stdout.strip().splitlines()[-1])})
             print(f"round {r} {name}: done", file=sys.stderr)
-    (HERE / "xla_cpu_settings.json").write_text(json.dumps(
+    atomic_write(RESULTS_DIR / "xla_cpu_settings.json", json.dumps(
         {"cpu_count": os.cpu_count(), "rows": rows}, indent=1))
     import numpy as np
 
