@@ -1,7 +1,8 @@
 """The rig's CBC control: what its residual fundamental is, and what the control term buys.
 
 Run: ``python benchmarks/bench_rig_control.py`` (about 1 min on 2 cores with a warm
-cache). Writes ``benchmarks/results/rig_control.json``; ``docs/validation.md`` quotes what it measures.
+cache). Writes ``benchmarks/results/rig_control.json``; ``docs/validation.md`` quotes what it
+measures.
 On the 7 recordings in ``../shared/data/flutter_cbc``:
 
 1. **The actuator command** (row 2 of ``data``, the rig description's control
