@@ -52,7 +52,21 @@ def test_jacobian_matches_central_differences_of_re_solved_orbits(problem):
     np.testing.assert_array_equal(G[R * P:], np.eye(problem.n))
 
 
-def test_periods_derivative_matches_re_solved_orbits(problem):
+@pytest.fixture
+def tight(monkeypatch):
+    """The orbits solved and differentiated at tolerances far below the analysis's own, so
+    that the central differences of re-solved periods resolve their small derivatives."""
+    import bayeshopf.discrepancy.orbits as orbits
+
+    monkeypatch.setattr(orbits, "_RTOL", 1e-10)
+    monkeypatch.setattr(orbits, "_ATOL", 1e-13)
+    monkeypatch.setattr(orbits, "TOL", 1e-10)
+    orbits._flow_jacobian.cache_clear()
+    yield
+    orbits._flow_jacobian.cache_clear()
+
+
+def test_periods_derivative_matches_re_solved_orbits(problem, tight):
     x = np.zeros(problem.n)
     ob, _ = problem.solve(x)
     p0 = problem.params(x)

@@ -142,9 +142,9 @@ def _gauss_evidence(Et: np.ndarray, Gt: np.ndarray, x: np.ndarray, positive: Seq
 
 
 
-def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, tau: float
-              ) -> tuple[np.ndarray, np.ndarray, float]:
-    r"""Residuals and Jacobian whitened at ``fitter.sigma`` → at :math:`\sigma(\tau)`.
+def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, taus
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""Residuals and Jacobian whitened at ``fitter.sigma`` → at :math:`\sigma(\tau)`, every τ.
 
     The data rows of ``E`` (``(N,)``) and ``G`` (``(N, n)``) are rescaled by
     :math:`\sigma_0/\sigma(\tau)` and the sensor offsets are profiled again with
@@ -153,27 +153,37 @@ def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, tau:
     their fixed charge. Also returns the :math:`\tau`-dependent normaliser
     :math:`-\sum\log\sigma - \tfrac12\sum_j \log\sum_r \sigma_{rj}^{-2}` (the
     second sum from integrating each offset under a flat prior).
+
+    Returns:
+        ``(E_τ, G_τ, normaliser)`` of shapes ``(S, N)``, ``(S, N, n)`` and
+        ``(S,)`` for the ``S`` values of ``taus``.
     """
     R, P = fitter.mf.y.shape
-    s0, s1 = fitter.sigma, fitter.sigma_at(tau)
+    taus = np.atleast_1d(np.asarray(taus, float))
+    s0 = fitter.sigma
+    s1 = np.stack([fitter.sigma_at(float(t)) for t in taus])                   # (S, R, P)
     e = E[: R * P].reshape(R, P)
     g = G[: R * P].reshape(R, P, -1)
     ratio = s0 / s1
     e1 = np.where(ok[:, None], e * ratio, e)
     g1 = g * ratio[..., None]
-    lognorm = -float(np.sum(np.log(s1)))
+    lognorm = -np.sum(np.log(s1), axis=(1, 2))
     for j in fitter.mean_cols:
-        w_all = 1.0 / s1[:, j] ** 2
-        lognorm -= 0.5 * float(np.log(w_all.sum()))
+        w_all = 1.0 / s1[:, :, j] ** 2                                       # (S, R)
+        lognorm -= 0.5 * np.log(w_all.sum(axis=1))
         if not ok.any():
             continue
-        w = w_all[ok]
-        off = np.sum(w * e[ok, j] * s0[ok, j]) / w.sum()
-        offg = np.sum((w * s0[ok, j])[:, None] * g[ok, j, :], axis=0) / w.sum()
-        e1[ok, j] -= off / s1[ok, j]
-        g1[ok, j, :] -= offg[None, :] / s1[ok, j, None]
-    return (np.concatenate([e1.ravel(), E[R * P:]]),
-            np.concatenate([g1.reshape(R * P, -1), G[R * P:]]), lognorm)
+        w = w_all[:, ok]
+        off = np.sum(w * (e[ok, j] * s0[ok, j]), axis=1) / w.sum(axis=1)            # (S,)
+        offg = np.einsum("sr,rk->sk", w * s0[ok, j], g[ok, j, :]) / w.sum(axis=1)[:, None]
+        e1[:, ok, j] -= off[:, None] / s1[:, ok, j]
+        g1[:, ok, j, :] -= offg[:, None, :] / s1[:, ok, j, None]
+    S = taus.size
+    return (np.concatenate([e1.reshape(S, R * P), np.broadcast_to(E[R * P:], (S, E.size - R * P))],
+                           axis=1),
+            np.concatenate([g1.reshape(S, R * P, -1),
+                            np.broadcast_to(G[R * P:], (S, *G[R * P:].shape))], axis=1),
+            lognorm)
 
 
 def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
@@ -186,10 +196,9 @@ def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
 
     Returns the :class:`ModelError` and the log evidence at each τ.
     """
-    lz = np.empty(TAU.size)
-    for i, t in enumerate(TAU):
-        Et, Gt, ln = _rewhiten(fitter, E, G, ok, t)
-        lz[i] = evidence(Et, Gt) + ln - (penalty(t, Et, Gt) if penalty else 0.0)
+    Es, Gs, ln = _rewhiten(fitter, E, G, ok, TAU)
+    lz = np.array([evidence(Es[i], Gs[i]) + ln[i] - (penalty(t, Es[i], Gs[i]) if penalty else 0.0)
+                   for i, t in enumerate(TAU)])
     mx = lz.max()
     w = np.exp(lz - mx)
     w /= w.sum()
@@ -203,7 +212,7 @@ def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
 def _at_tau(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, tau: float):
     """``E``, ``G`` whitened at ``tau`` (no normaliser)."""
     Et, Gt, _ = _rewhiten(fitter, E, G, ok, tau)
-    return Et, Gt
+    return Et[0], Gt[0]
 
 
 def _null(fitter: Fitter, e0: np.ndarray, ok: np.ndarray) -> ModelError:

@@ -57,7 +57,13 @@ __all__ = ["OrbitBatch", "sensitivities", "solve_orbits", "track"]
 
 #: Samples per period of the solved orbits (enough for harmonics up to ~20).
 N_SAMPLES = 64
-_RTOL, _ATOL = 1e-9, 1e-12
+#: The solver's tolerances, matched to what the orbits are compared with: a
+#: recording's features are known to about 10⁻⁴ of the orbit's size at best, and
+#: a shot at these tolerances is within a few 10⁻⁸ of one at 10⁻¹².
+_RTOL, _ATOL = 1e-7, 1e-10
+#: Newton's convergence on its step relative to the orbit's size, well above the
+#: shots' own error (which a smaller tolerance would chase as a stall).
+TOL = 1e-6
 #: Largest number of solver steps per period, far below the simulators' default:
 #: a Newton iterate that blows up stops here.
 _MAX_STEPS = 4096
@@ -75,6 +81,20 @@ def _batched(system: System):
     """
     k = kernels(system, _RTOL, _ATOL, max_steps=_MAX_STEPS, mu_sensitivity=False)
     return k.shoot_batch, k.f_batch, k.sample_batch
+
+
+def _batched_call(fn, arrays: Sequence, *rest):
+    """``fn(*arrays, *rest)`` with the orbits' axis padded to the next power of two.
+
+    The rows added repeat the last one and are dropped from the result (every
+    leaf, as NumPy arrays), so the compiled programs see one shape per power of
+    two rather than one per number of orbits that a homotopy retries.
+    """
+    R = len(arrays[0])
+    B = 1 << max(0, (R - 1).bit_length())
+    padded = [jnp.asarray(np.concatenate([a, np.repeat(a[-1:], B - R, axis=0)]) if B > R else a)
+              for a in (np.asarray(a) for a in arrays)]
+    return jax.tree_util.tree_map(lambda o: np.asarray(o)[:R], fn(*padded, *rest))
 
 
 @dataclass(frozen=True)
@@ -105,7 +125,8 @@ def _params(p: dict) -> dict:
 
 
 def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
-                 max_iter: int = 20, tol: float = 1e-9, sample: bool = True) -> OrbitBatch:
+                 max_iter: int = 20, tol: float | None = None, sample: bool = True
+                 ) -> OrbitBatch:
     """Newton's method for all orbits from the warm starts ``(x0, period)`` (module docstring).
 
     Args:
@@ -116,23 +137,25 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
         mu: μ of each orbit.
         stable: Expected Floquet stability of each (its branch).
         max_iter: Largest number of Newton steps.
-        tol: Convergence on the Newton step relative to the orbit's size.
+        tol: Convergence on the Newton step relative to the orbit's size (default
+            :data:`TOL`).
         sample: Sample the orbits found (``states``); otherwise ``states`` is NaN.
     """
     ensure_x64()
+    tol = TOL if tol is None else tol
     shoot, f, _ = _batched(system)
     p = _params(params)
     xhat = np.array(x0, dtype=np.float64)
     R, n = xhat.shape
     mu = np.asarray(mu, dtype=np.float64)
-    fhat = np.asarray(f(jnp.asarray(xhat), jnp.asarray(mu), p))
+    fhat = _batched_call(f, (xhat, mu), p)
     x, T = xhat.copy(), np.array(period, dtype=np.float64)
     done = np.zeros(R, bool)
     alive = np.ones(R, bool)
     mono = np.zeros((R, n, n))
     steps = np.full((max_iter, R), np.inf)          # each iteration's step relative to the size
     for it in range(max_iter):
-        out = np.asarray(shoot(jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p))
+        out = _batched_call(shoot, (x, T, mu), p)
         x1, phi, _, f1, okr = split_shot(out, n)
         okr = okr & np.all(np.isfinite(out), axis=1)
         alive &= okr | done
@@ -195,44 +218,51 @@ def _sample(system: System, p: dict, x, T, mu, ok) -> np.ndarray:
     if not np.any(ok):
         return states
     x, T, mu = _lost_as_found(ok, x, T, mu)
-    s = np.asarray(_batched(system)[2](jnp.asarray(x), jnp.asarray(T), jnp.asarray(mu), p,
-                                       N_SAMPLES))
+    s = _batched_call(_batched(system)[2], (x, T, mu), p, N_SAMPLES)
     states[ok] = s[ok]
     return states
 
 
-def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch, stable
-          ) -> OrbitBatch:
+def track(system: System, params_from: dict, params_to: dict, start: OrbitBatch, stable,
+          guess: tuple[np.ndarray, np.ndarray] | None = None) -> OrbitBatch:
     """The orbits at ``params_to``, continued from ``start`` (at ``params_from``) by homotopy.
 
-    An orbit that is not found in one step is retried in 4, then 16 equal steps
-    of the parameters; one still not found (or ``start`` lost) is lost.
+    The first, whole step starts Newton's method from ``guess`` (points and
+    periods, e.g. ``start`` moved along its derivatives in the parameters), or
+    from ``start`` itself. An orbit that is not found in that step is retried
+    from ``start`` in 4 equal steps of the parameters, then in 16 from the
+    furthest of those it reached; one still not found (or ``start`` lost) is lost.
     """
     ensure_x64()
     stable = np.asarray(stable, bool)
-    res = solve_orbits(system, params_to, start.x0, start.period, start.mu, stable, sample=False)
-    x0, T, ok = res.x0.copy(), res.period.copy(), res.ok & start.ok
+    x_first, T_first = (start.x0, start.period) if guess is None else guess
+    x0, T, ok = start.x0.copy(), start.period.copy(), np.zeros(start.ok.shape, bool)
+    live = np.nonzero(start.ok)[0]                     # an orbit lost at the start stays lost
+    if live.size:
+        res = solve_orbits(system, params_to, np.asarray(x_first)[live],
+                           np.asarray(T_first)[live], start.mu[live], stable[live], sample=False)
+        x0[live], T[live], ok[live] = res.x0, res.period, res.ok
+    bad = np.nonzero(~ok & start.ok)[0]
+    cx, cT = start.x0[bad].copy(), start.period[bad].copy()
+    reached = np.zeros(bad.size)                # the fraction of the way each retry has come
     for n_sub in (4, 16):
-        bad = np.nonzero(~ok & start.ok)[0]
-        if bad.size == 0:
-            break
-        cx, cT = start.x0[bad].copy(), start.period[bad].copy()
-        alive = np.ones(bad.size, bool)
-        sub = None
+        alive = reached < 1
         for j in range(1, n_sub + 1):
             w = j / n_sub
+            act = np.nonzero(alive & (reached < w))[0]
+            if act.size == 0:
+                continue
             pj = {k: (1 - w) * float(params_from.get(k, 0.0)) + w * float(v)
                   for k, v in params_to.items()}
-            sub = solve_orbits(system, pj, cx, cT, start.mu[bad], stable[bad], sample=False)
-            alive &= sub.ok
-            cx = np.where(sub.ok[:, None], sub.x0, cx)
-            cT = np.where(sub.ok, sub.period, cT)
+            sub = solve_orbits(system, pj, cx[act], cT[act], start.mu[bad[act]],
+                               stable[bad[act]], sample=False)
+            won = act[sub.ok]
+            cx[won], cT[won], reached[won] = sub.x0[sub.ok], sub.period[sub.ok], w
+            alive[act[~sub.ok]] = False
             if not alive.any():
                 break
-        if sub is not None:
-            good = bad[alive]
-            x0[good], T[good] = cx[alive], cT[alive]
-            ok[good] = True
+    done = reached >= 1
+    x0[bad[done]], T[bad[done]], ok[bad[done]] = cx[done], cT[done], True
     states = _sample(system, _params(params_to), x0, T, start.mu, ok)
     return OrbitBatch(x0=x0, period=T, mu=start.mu, ok=ok, states=states)
 
@@ -298,10 +328,10 @@ def sensitivities(system: System, params: dict, ob: OrbitBatch, names: Sequence[
     p = _params(params)
     # every orbit goes in (one compiled shape); a lost one runs as a copy of a found one
     x0, T, mu = _lost_as_found(ok, ob.x0, ob.period, ob.mu)
-    out = _flow_jacobian(system.rhs)(jnp.asarray(x0), jnp.asarray(T), jnp.asarray(mu), p)
-    Jx, JT = np.asarray(out[1]), np.asarray(out[2])
-    Q = np.stack([np.asarray(out[3][k]) for k in names], axis=-1)      # (R, N+1, n, m)
-    f0 = np.asarray(_batched(system)[1](jnp.asarray(x0), jnp.asarray(mu), p))
+    out = _batched_call(_flow_jacobian(system.rhs), (x0, T, mu), p)
+    Jx, JT = out[1], out[2]
+    Q = np.stack([out[3][k] for k in names], axis=-1)                  # (R, N+1, n, m)
+    f0 = _batched_call(_batched(system)[1], (x0, mu), p)
     for i in np.nonzero(ok)[0]:
         A = np.zeros((n + 1, n + 1))
         A[:n, :n] = Jx[i, -1] - np.eye(n)

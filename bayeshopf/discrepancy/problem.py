@@ -95,6 +95,8 @@ class Problem:
         self.known = list(known)
         self.last: tuple[np.ndarray, np.ndarray] | None = None
         self.first: tuple[np.ndarray, np.ndarray] | None = None
+        # the orbits' derivatives in x where a Jacobian was formed: (x, (∂x0/∂x, ∂T/∂x, known))
+        self.tangents: list[tuple[np.ndarray, tuple]] = []
 
     def params(self, x: np.ndarray) -> dict:
         """The simulator's parameters at ``x = (z, ζ...)``."""
@@ -120,7 +122,20 @@ class Problem:
     def _track(self, x_from, ob_from, x_to) -> OrbitBatch:
         self.n_track += 1
         return track(self.fitter.system, self.params(x_from), self.params(x_to), ob_from,
-                     self.fitter.stable)
+                     self.fitter.stable, guess=self._predict(x_from, ob_from, x_to))
+
+    def _predict(self, x_from, ob_from, x_to):
+        """Orbits at ``x_to`` to first order from those at ``x_from``, where their
+        derivatives in every unknown that moves are known (a Jacobian formed there)."""
+        t = next((d for xk, d in self.tangents if np.array_equal(xk, x_from)), None)
+        if t is None:
+            return None
+        dx = np.asarray(x_to, float) - x_from
+        dx0, dT, have = t
+        if np.any(dx[~have] != 0):
+            return None
+        dx = np.where(have, dx, 0.0)
+        return ob_from.x0 + dx0 @ dx, ob_from.period + dT @ dx
 
     def solve(self, x: np.ndarray) -> tuple[OrbitBatch, np.ndarray]:
         """The orbits and stacked residuals :math:`E(x)` (memoised)."""
@@ -168,9 +183,19 @@ class Problem:
             G[: R * P, :n_known] = kn[:, :n_known]
         need = list(range(n_known, self.n))
         if need:
-            D = self.fitter.derivatives(ob, self.params(x), [self._column_params(j) for j in need])
+            D, dx0, dT = self.fitter.derivatives(ob, self.params(x),
+                                                 [self._column_params(j) for j in need],
+                                                 orbits=True)
+            slopes = np.array([self._slope(j, x) for j in need])
             for c, j in enumerate(need):
-                G[: R * P, j] = self._slope(j, x) * D[..., c].ravel()
+                G[: R * P, j] = slopes[c] * D[..., c].ravel()
+            have = np.zeros(self.n, bool)
+            have[need] = True
+            Dx0 = np.zeros((*dx0.shape[:2], self.n))
+            DT = np.zeros((dT.shape[0], self.n))
+            Dx0[..., need] = dx0 * slopes
+            DT[:, need] = dT * slopes
+            self.tangents = [*self.tangents[-7:], (x.copy(), (Dx0, DT, have))]
         G[R * P:] = np.eye(self.n)                             # the prior rows, exactly
         self.last = (x.copy(), G.copy())
         if self.first is None:

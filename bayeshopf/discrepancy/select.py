@@ -190,7 +190,8 @@ class Fitter:
         e[~ok] = np.sqrt(LOST_CHI2)
         return e
 
-    def derivatives(self, ob: OrbitBatch, params: dict, names: Sequence[str]) -> np.ndarray:
+    def derivatives(self, ob: OrbitBatch, params: dict, names: Sequence[str], *,
+                    orbits: bool = False):
         """Exact derivatives ``(R, P, m)`` of the whitened residuals in ``params[names]``.
 
         The orbits' derivatives come from one implicit solve at ``ob``
@@ -199,12 +200,17 @@ class Fitter:
         with a fixed phase, the frequency), differentiated along each exact
         direction by a central difference of 10⁻⁶ of the orbits' size, which
         re-solves no orbit. A lost orbit's rows are 0.
+
+        With ``orbits``, also returns the orbits' own derivatives
+        ``(∂x0/∂p, ∂T/∂p)``, shapes ``(R, n, m)`` and ``(R, m)``.
         """
         R, P = self.mf.y.shape
         out = np.zeros((R, P, len(names)))
         ok = ob.ok
         if not ok.any():
-            return out
+            n = ob.x0.shape[1]
+            return (out, np.zeros((R, n, len(names))), np.zeros((R, len(names)))) if orbits \
+                else out
         dS, dT = sensitivities(self.system, params, ob, names)
         size = float(np.max(np.abs(ob.states[ok])))
         for c in range(len(names)):
@@ -219,7 +225,7 @@ class Fitter:
                             period=ob.period - h * dT[:, c])
             out[..., c] = (self.residuals(plus) - self.residuals(minus)) / (2 * h)
         out[~ok] = 0.0
-        return out
+        return (out, dS[:, 0], dT) if orbits else out       # the samples start at x0
 
     def offsets(self, ob: OrbitBatch) -> dict[str, float]:
         """The sensor offsets that the residuals profile out, per channel."""

@@ -172,8 +172,9 @@ def unexplained(cal: Calibration) -> Unexplained:
     taus = TAU[::TAU_STRIDE]
     lz = np.empty((taus.size, N_ETA, N_ELL))
     lz0 = np.empty(taus.size)
+    Es, Gs, lns = _rewhiten(fitter, E, G, ok, taus)
     for a, tau in enumerate(taus):
-        Et, Gt, ln = _rewhiten(fitter, E, G, ok, float(tau))
+        Et, Gt, ln = Es[a], Gs[a], lns[a]
         lz0[a] = laplace_evidence(Et, Gt)[0] + ln
         s1 = fitter.sigma_at(float(tau))
         W = {j: fitter.ref[found, j] / s1[found, j] for j in cols}
