@@ -50,6 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
+from bayeshopf.discrepancy.programs import program
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.periodic import floquet_stable, kernels, split_shot
 
@@ -73,28 +74,42 @@ STALL_FACTOR = 0.9
 STALL_FROM = 5
 
 
-def _batched(system: System):
-    """Vectorised shooting (state, monodromy, f at the end), field and sampling of one system.
+def _kernels(system: System):
+    """The shared kernels of :func:`bayeshopf.simulators.periodic.kernels`, without μ's.
 
-    The shared kernels of :func:`bayeshopf.simulators.periodic.kernels`, without
-    the μ-sensitivity (Newton here is at fixed μ).
+    Newton's method here is at fixed μ, so the shots leave out the sensitivity to μ.
     """
-    k = kernels(system, _RTOL, _ATOL, max_steps=_MAX_STEPS, mu_sensitivity=False)
-    return k.shoot_batch, k.f_batch, k.sample_batch
+    return kernels(system, _RTOL, _ATOL, max_steps=_MAX_STEPS, mu_sensitivity=False)
 
 
-def _batched_call(fn, arrays: Sequence, *rest):
-    """``fn(*arrays, *rest)`` with the orbits' axis padded to the next power of two.
+#: The batched programs by name: each builds, for a system (and static sizes), a
+#: function of ``(*arrays, params)`` (:func:`_batched_call`).
+_MAKERS = {
+    # state, monodromy and f at the end of one period
+    "shoot": lambda system: _kernels(system).shoot_batch,
+    "field": lambda system: _kernels(system).f_batch,
+    "sample": lambda system, n: (lambda x0, T, mu, p: _kernels(system).sample_batch(x0, T, mu,
+                                                                                   p, n)),
+    "flow": lambda system: _flow_jacobian(system.rhs),
+}
+
+
+def _batched_call(system: System, name: str, arrays: Sequence, p: dict, *static):
+    """Program ``name`` of :data:`_MAKERS` on ``(*arrays, p)``, orbits padded to a power of two.
 
     The rows added repeat the last one and are dropped from the result (every
     leaf, as NumPy arrays), so the compiled programs see one shape per power of
-    two rather than one per number of orbits that a homotopy retries.
+    two rather than one per number of orbits that a homotopy retries; they are
+    stored across processes where the system's code allows
+    (:mod:`bayeshopf.discrepancy.programs`).
     """
     R = len(arrays[0])
     B = 1 << max(0, (R - 1).bit_length())
-    padded = [jnp.asarray(np.concatenate([a, np.repeat(a[-1:], B - R, axis=0)]) if B > R else a)
-              for a in (np.asarray(a) for a in arrays)]
-    return jax.tree_util.tree_map(lambda o: np.asarray(o)[:R], fn(*padded, *rest))
+    padded = tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], B - R, axis=0)])
+                               if B > R else a) for a in (np.asarray(a) for a in arrays))
+    fn = program(system.rhs, name, lambda: _MAKERS[name](system, *static), (*padded, p),
+                 (_RTOL, _ATOL, _MAX_STEPS, N_SAMPLES, *static))
+    return jax.tree_util.tree_map(lambda o: np.asarray(o)[:R], fn(*padded, p))
 
 
 @dataclass(frozen=True)
@@ -143,19 +158,18 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     """
     ensure_x64()
     tol = TOL if tol is None else tol
-    shoot, f, _ = _batched(system)
     p = _params(params)
     xhat = np.array(x0, dtype=np.float64)
     R, n = xhat.shape
     mu = np.asarray(mu, dtype=np.float64)
-    fhat = _batched_call(f, (xhat, mu), p)
+    fhat = _batched_call(system, "field", (xhat, mu), p)
     x, T = xhat.copy(), np.array(period, dtype=np.float64)
     done = np.zeros(R, bool)
     alive = np.ones(R, bool)
     mono = np.zeros((R, n, n))
     steps = np.full((max_iter, R), np.inf)          # each iteration's step relative to the size
     for it in range(max_iter):
-        out = _batched_call(shoot, (x, T, mu), p)
+        out = _batched_call(system, "shoot", (x, T, mu), p)
         x1, phi, _, f1, okr = split_shot(out, n)
         okr = okr & np.all(np.isfinite(out), axis=1)
         alive &= okr | done
@@ -218,7 +232,7 @@ def _sample(system: System, p: dict, x, T, mu, ok) -> np.ndarray:
     if not np.any(ok):
         return states
     x, T, mu = _lost_as_found(ok, x, T, mu)
-    s = _batched_call(_batched(system)[2], (x, T, mu), p, N_SAMPLES)
+    s = _batched_call(system, "sample", (x, T, mu), p, N_SAMPLES)
     states[ok] = s[ok]
     return states
 
@@ -328,10 +342,10 @@ def sensitivities(system: System, params: dict, ob: OrbitBatch, names: Sequence[
     p = _params(params)
     # every orbit goes in (one compiled shape); a lost one runs as a copy of a found one
     x0, T, mu = _lost_as_found(ok, ob.x0, ob.period, ob.mu)
-    out = _batched_call(_flow_jacobian(system.rhs), (x0, T, mu), p)
+    out = _batched_call(system, "flow", (x0, T, mu), p)
     Jx, JT = out[1], out[2]
     Q = np.stack([out[3][k] for k in names], axis=-1)                  # (R, N+1, n, m)
-    f0 = _batched_call(_batched(system)[1], (x0, mu), p)
+    f0 = _batched_call(system, "field", (x0, mu), p)
     for i in np.nonzero(ok)[0]:
         A = np.zeros((n + 1, n + 1))
         A[:n, :n] = Jx[i, -1] - np.eye(n)

@@ -125,8 +125,11 @@ class Problem:
                      self.fitter.stable, guess=self._predict(x_from, ob_from, x_to))
 
     def _predict(self, x_from, ob_from, x_to):
-        """Orbits at ``x_to`` to first order from those at ``x_from``, where their
-        derivatives in every unknown that moves are known (a Jacobian formed there)."""
+        """Orbits at ``x_to`` to first order from those at ``x_from``, or ``None``.
+
+        The first-order step needs the orbits' derivatives in every unknown that
+        moves, known where a Jacobian was formed at ``x_from``.
+        """
         t = next((d for xk, d in self.tangents if np.array_equal(xk, x_from)), None)
         if t is None:
             return None

@@ -82,6 +82,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
+from bayeshopf.discrepancy import programs
 from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators.base import System
 
@@ -460,4 +461,9 @@ def _library_system(system: System, spec: tuple) -> System:
     params = {t.param: 0.0 for t in terms}
     params.update({f"eps_{t.name}": 1e-6 for t in terms})
     params.update({f"k_{t.name}": 0.0 for t in terms})
-    return system.with_extra_force(force, name=f"{system.name}+library", params=params)
+    out = system.with_extra_force(force, name=f"{system.name}+library", params=params)
+    base, force_input = programs.key_of(system.rhs), programs.key_of(system.force_input)
+    if base is not None and force_input is not None:  # the closure is pinned down by these
+        programs.register(out.rhs, ("library", *base, *force_input, spec, system.state_names,
+                                    system.coordinates))
+    return out

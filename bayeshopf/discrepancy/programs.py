@@ -1,0 +1,84 @@
+"""The orbits' compiled programs, stored across processes where their code has a key.
+
+JAX's persistent cache skips XLA's compilation of a program it has seen, but
+not the tracing of the Python function and its lowering, which for a diffrax
+solve with its variational equations takes seconds per program and batch size,
+in every process. The batched programs of :mod:`bayeshopf.discrepancy.orbits`
+(the shot, the field, the samples and the flow's derivatives) therefore go
+through :func:`bayeshopf.inference.cache.compiled_function`: exported once
+with :mod:`jax.export` and loaded by later processes, when the right-hand side's
+code is pinned down by a key:
+
+- a module-level function of bayeshopf (its source is part of every stored
+  program's file name), or
+- a closure registered with :func:`register` under a key of its own (the term
+  library's system, :func:`bayeshopf.discrepancy.terms.library_system`).
+
+Any other right-hand side (a user's simulator, a planted effect) is traced in
+every process, as before, and so is every program when the persistent cache is
+off or a program cannot be exported.
+"""
+
+from __future__ import annotations
+
+import os
+import weakref
+from collections.abc import Callable, Hashable
+
+__all__ = ["key_of", "program", "register"]
+
+_KEYS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PROGRAMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def register(fn: Callable, key: tuple) -> None:
+    """Declare that ``fn`` (a closure) computes what ``key`` (strings, numbers) says."""
+    _KEYS[fn] = key
+
+
+def key_of(fn: Callable | None) -> tuple | None:
+    """The key of a right-hand side or force input, ``None`` where its code is not pinned down."""
+    if fn is None:
+        return None
+    try:
+        if fn in _KEYS:
+            return _KEYS[fn]
+    except TypeError:                   # not weakly referable
+        return None
+    module = getattr(fn, "__module__", "") or ""
+    qualname = getattr(fn, "__qualname__", "<locals>")
+    if module.startswith("bayeshopf.") and "<locals>" not in qualname:
+        return (f"{module}:{qualname}",)
+    return None
+
+
+def program(rhs: Callable, name: str, make: Callable[[], Callable], args: tuple,
+            settings: tuple[Hashable, ...]) -> Callable:
+    """The compiled ``make()`` for ``args``' shapes, stored across processes where it can be.
+
+    Args:
+        rhs: The right-hand side the program integrates (its key decides).
+        name: The program ("shoot", "sample", ...).
+        make: Builds the function (jitted or not) of ``args``.
+        args: Arrays (one shape per call site and batch size), the parameters last.
+        settings: Everything else the function closes over (tolerances, static sizes).
+
+    Returns:
+        A callable of ``args``.
+    """
+    from bayeshopf.inference.cache import compiled_function
+
+    shapes = tuple(getattr(a, "shape", ()) for a in args[:-1])
+    per_rhs = _PROGRAMS.setdefault(rhs, {})
+    sig = (name, shapes, settings, tuple(args[-1]) if isinstance(args[-1], dict) else ())
+    if sig not in per_rhs:
+        key = key_of(rhs)
+        fn = None
+        if key is not None:
+            stored_key = (*key, name, *settings, os.environ.get("EQX_ON_ERROR", ""))
+            try:
+                fn = compiled_function(f"orbits-{name}", make, args, stored_key)
+            except Exception:  # noqa: BLE001 - not exportable (e.g. a host callback): trace it
+                fn = None
+        per_rhs[sig] = fn if fn is not None else make()
+    return per_rhs[sig]
