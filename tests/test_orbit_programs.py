@@ -70,8 +70,6 @@ def test_the_library_systems_programs_are_traced_by_the_first_process_only(tmp_p
     assert n_first >= 1 and n_second == 0
     np.testing.assert_array_equal(first, second)
     assert len(list(tmp_path.glob("bayeshopf-exported-orbits-shoot-*.bin"))) == 1
-    flow, n_flow = _run(tmp_path, None, "flow", "one")
-    assert n_flow >= 1 and _run(tmp_path, None, "flow", "one")[1] == 0
     # a user's EQX_ON_ERROR=raise puts a host callback in the flow's program (diffrax checks
     # its save times): nothing is stored, and it is traced in every process, same result
     other = tmp_path / "raise"
@@ -79,5 +77,4 @@ def test_the_library_systems_programs_are_traced_by_the_first_process_only(tmp_p
     again, n_again = _run(other, "raise", "flow", "one")
     assert n_raised >= 1 and n_again >= 1
     assert not list(other.glob("bayeshopf-exported-orbits-flow-*.bin"))
-    np.testing.assert_allclose(raised, flow, rtol=1e-12)
     np.testing.assert_array_equal(raised, again)
