@@ -81,3 +81,39 @@ def test_periods_derivative_matches_re_solved_orbits(problem, tight):
         np.testing.assert_allclose(dT[:, c], ref, rtol=1e-4, atol=1e-12 * ob.period.max())
     with pytest.raises(KeyError, match="parameters of the system expected"):
         sensitivities(problem.fitter.system, p0, ob, ["no_such_parameter"])
+
+
+def test_a_tracked_step_starts_from_the_orbits_moved_along_their_derivatives(problem):
+    # where a Jacobian was formed, the next point's orbits are guessed to first order: the
+    # guess's error falls with the square of the step (the start's with the step), and
+    # tracking from it finds the same orbits
+    x0 = np.zeros(problem.n)
+    problem.jacobian(x0)
+    ob0, _ = problem.solve(x0)
+    errors = []
+    for step in (0.2, 0.1):
+        x = x0.copy()
+        x[0] = step                                  # k_h
+        guess = problem._predict(x0, ob0, x)
+        plain = track(problem.fitter.system, problem.params(x0), problem.params(x), ob0,
+                      problem.fitter.stable)
+        guided = track(problem.fitter.system, problem.params(x0), problem.params(x), ob0,
+                       problem.fitter.stable, guess=guess)
+        assert plain.ok.all() and guided.ok.all()
+        np.testing.assert_allclose(guided.period, plain.period, rtol=1e-6)
+        errors.append((np.abs(ob0.period - plain.period), np.abs(guess[1] - plain.period)))
+    (start_2, guess_2), (start_1, guess_1) = errors
+    assert np.all(guess_1 < 0.1 * start_1)
+    np.testing.assert_allclose(start_2 / start_1, 2.0, rtol=0.1)      # first order
+    np.testing.assert_allclose(guess_2 / guess_1, 4.0, rtol=0.1)      # second order
+    x[-1] = 0.1                                  # the term too: the same orbits found
+    guided = track(problem.fitter.system, problem.params(x0), problem.params(x), ob0,
+                   problem.fitter.stable, guess=problem._predict(x0, ob0, x))
+    plain = track(problem.fitter.system, problem.params(x0), problem.params(x), ob0,
+                  problem.fitter.stable)
+    np.testing.assert_allclose(guided.period, plain.period, rtol=1e-6)
+    # a point that moves an unknown without known derivatives gets no guess
+    have = problem.tangents[-1][1][2]
+    have[0] = False
+    assert problem._predict(x0, ob0, x) is None
+    have[0] = True
