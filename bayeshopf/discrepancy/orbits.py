@@ -59,8 +59,8 @@ __all__ = ["OrbitBatch", "sensitivities", "solve_orbits", "track"]
 #: Samples per period of the solved orbits (enough for harmonics up to ~20).
 N_SAMPLES = 64
 #: The solver's tolerances, matched to what the orbits are compared with: a
-#: recording's features are known to about 10⁻⁴ of the orbit's size at best, and
-#: a shot at these tolerances is within a few 10⁻⁸ of one at 10⁻¹².
+#: recording's features are rarely known to better than 10⁻⁵ of the orbit's size,
+#: and a shot at these tolerances is within a few 10⁻⁸ of one at 10⁻¹².
 _RTOL, _ATOL = 1e-7, 1e-10
 #: Newton's convergence on its step relative to the orbit's size, well above the
 #: shots' own error (which a smaller tolerance would chase as a stall).
