@@ -25,10 +25,20 @@ import os
 import weakref
 from collections.abc import Callable, Hashable
 
+from bayeshopf.inference.cache import compiled_function, on_release
+
 __all__ = ["key_of", "program", "register"]
 
 _KEYS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_PROGRAMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: The stored programs of this process, by key, name, shapes and settings (the
+#: code with a key is bayeshopf's, so there are few of them); dropped with the
+#: others by :func:`bayeshopf.inference.cache.release_compiled`.
+_PROGRAMS: dict[tuple, Callable] = {}
+
+
+@on_release
+def _forget() -> None:
+    _PROGRAMS.clear()
 
 
 def register(fn: Callable, key: tuple) -> None:
@@ -66,19 +76,15 @@ def program(rhs: Callable, name: str, make: Callable[[], Callable], args: tuple,
     Returns:
         A callable of ``args``.
     """
-    from bayeshopf.inference.cache import compiled_function
-
+    key = key_of(rhs)
+    if key is None:
+        return make()
     shapes = tuple(getattr(a, "shape", ()) for a in args[:-1])
-    per_rhs = _PROGRAMS.setdefault(rhs, {})
-    sig = (name, shapes, settings, tuple(args[-1]) if isinstance(args[-1], dict) else ())
-    if sig not in per_rhs:
-        key = key_of(rhs)
-        fn = None
-        if key is not None:
-            stored_key = (*key, name, *settings, os.environ.get("EQX_ON_ERROR", ""))
-            try:
-                fn = compiled_function(f"orbits-{name}", make, args, stored_key)
-            except Exception:  # noqa: BLE001 - not exportable (e.g. a host callback): trace it
-                fn = None
-        per_rhs[sig] = fn if fn is not None else make()
-    return per_rhs[sig]
+    sig = (key, name, shapes, settings, tuple(args[-1]) if isinstance(args[-1], dict) else ())
+    if sig not in _PROGRAMS:
+        stored_key = (*key, name, *settings, os.environ.get("EQX_ON_ERROR", ""))
+        try:
+            _PROGRAMS[sig] = compiled_function(f"orbits-{name}", make, args, stored_key)
+        except Exception:  # noqa: BLE001 - not exportable (e.g. a host callback): trace it
+            _PROGRAMS[sig] = make()
+    return _PROGRAMS[sig]
