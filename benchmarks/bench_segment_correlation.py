@@ -34,7 +34,10 @@ import numpy as np  # noqa: E402
 
 
 def _segments(extract):
-    """``extract()``'s result and each recording's aligned segment coefficients ``(n_seg, 2·(2K+1))``."""
+    """``extract()``'s result, and each recording's aligned segment coefficients.
+
+    One array ``(n_seg, 2·(2K+1))`` per recording, in the order they are aligned.
+    """
     import bayeshopf.features.harmonics as H
 
     seen = []
@@ -55,7 +58,7 @@ def _segments(extract):
 
 
 def _correlation(X: np.ndarray) -> np.ndarray:
-    """Sample correlation of the columns of ``X``; a constant column (the crest's sine) is independent."""
+    """Sample correlation of the columns of ``X``; a constant one (the crest's sine) independent."""
     keep = X.std(axis=0) > 0
     R = np.eye(X.shape[1])
     R[np.ix_(keep, keep)] = np.corrcoef(X[:, keep].T)
@@ -79,7 +82,7 @@ def segment_correlations(rs) -> list[dict]:
 
 
 def covariance_effect(rs, seed: int = 0) -> list[dict]:
-    """The eigenvalues of ``D^{-1/2} S D^{-1/2}`` per recording at the default fit's model error (docstring)."""
+    """Eigenvalues of ``D^{-1/2} S D^{-1/2}`` per recording, at the default fit's model error."""
     import bayeshopf as bh
 
     fit, seen = _segments(lambda: bh.fit(rs, seed=seed, progress=False))

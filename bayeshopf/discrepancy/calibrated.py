@@ -76,7 +76,9 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
     before_pts = diagram_points(diagram)
     fit_before, loc0 = fit_stage(fitter, fitter.base, 0.0, before_pts)
     cal_values = cal.values()
-    cal_pts = points(system.with_params(**cal_values))
+    # on the library system with no term (the calibrated simulator itself), whose
+    # continuation programs the final model's diagram below then reuses
+    cal_pts = points(L.with_params(**library_params(lib), **cal_values))
     fit_cal, loc_cal = fit_stage(fitter, cal.orbits, cal.p_eff, cal_pts)
     fit_cal["parameters"] = cal_values
     stages = {"before": fit_before, "calibrated": fit_cal}

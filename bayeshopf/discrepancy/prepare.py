@@ -42,14 +42,20 @@ class Prepared(NamedTuple):
 
 
 def _base_warm_starts(system: System, rs: RecordingSet):
-    """Warm starts on the simulator's branches; ``None`` where the branch has no orbit."""
+    """Warm starts on the simulator's branches, and a note where the branch has no orbit.
+
+    Each is interpolated between the continuation points around the recording's
+    μ (:meth:`~bayeshopf.simulators.arclength.Branch.guess`); the orbits are
+    then solved together (:func:`prepare`), not one by one here. Where the
+    branch does not reach μ, its nearest point, with the reason as a note.
+    """
     diagram = bifurcation_diagram(system)
     x0, T, note = [], [], []
     for r in rs:
         try:
-            o = diagram.orbit_at(r.mu, r.branch)
-            x0.append(o.x0)
-            T.append(o.period)
+            x, period, _ = diagram.branch(r.branch).guess(r.mu)
+            x0.append(x)
+            T.append(period)
             note.append("")
         except BayesHopfError as exc:
             b = diagram.branch(r.branch)

@@ -326,9 +326,11 @@ def same_force_as(system: System, terms: Sequence[Term], parameters: Sequence[st
     def rhs_theta(theta, x, mu):
         return system.rhs(x, mu, {**p0, **dict(zip(names, theta, strict=True))})
 
-    # ∂ẋ/∂θ at every state: (N_STATES, n_states, n_parameters)
-    A = np.asarray(jax.vmap(jax.jacfwd(rhs_theta), in_axes=(None, 0, 0))(theta0, xs, mus))
-    B = np.asarray(jax.vmap(system.force_input, in_axes=(0, 0, None))(xs, mus, p0))
+    # ∂ẋ/∂θ at every state: (N_STATES, n_states, n_parameters); compiled, as run
+    # op by op a simulator's right-hand side takes seconds
+    A = np.asarray(jax.jit(jax.vmap(jax.jacfwd(rhs_theta), in_axes=(None, 0, 0)))(
+        theta0, xs, mus))
+    B = np.asarray(jax.jit(jax.vmap(system.force_input, in_axes=(0, 0, None)))(xs, mus, p0))
     out = {}
     for t in terms:
         pos = system.state_names.index(t.coordinate)

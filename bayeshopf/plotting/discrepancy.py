@@ -178,7 +178,7 @@ def plot_orbit_residuals(report, ax=None):
                         ha="center", va="center", fontsize=LEGEND_SIZE)
                 ax.set_yticks([])
             ax.axhline(0, color="0.6", lw=0.5)
-            style_axes(ax, grid=False)
+            style_axes(ax, grid=False, minor=False)
             if r == 0:
                 u = report.system.observed_units.get(c, "")
                 ax.set_title(f"{c} residual" + (f" ({u})" if u else ""), fontsize=TITLE_SIZE)

@@ -146,6 +146,38 @@ class Branch:
         """The orbit of this branch at ``mu`` (see :func:`orbit_at`)."""
         return _orbit_on(self, mu, n_points)
 
+    def guess(self, mu: float) -> tuple[np.ndarray, float, float]:
+        """``(x0, period, peak-to-peak of the first observed state)`` at ``mu``, interpolated.
+
+        Linear in μ between the two continuation points that bracket ``mu``
+        (the nearest point where none does): the start of Newton's method for
+        the orbit there (:meth:`orbit`), or of a batch of them.
+
+        Raises:
+            SimulationError: If ``mu`` is outside the branch's span.
+        """
+        mu = float(mu)
+        lo, hi = self.mu_span
+        system = self.system
+        u = system.parameter_units
+        if not lo <= mu <= hi:
+            raise SimulationError(
+                f"{self.kind} branch of {system.name}: no LCO at {system.parameter} = {mu:g}"
+                f"{' ' + u if u else ''}; it exists for {lo:.4g} <= {system.parameter} <= "
+                f"{hi:.4g}{' ' + u if u else ''}"
+            )
+        m, z1 = self.mu, self.amplitude[system.observed[0]]
+        idx = [i for i in range(len(m) - 1)
+               if (m[i] - mu) * (m[i + 1] - mu) <= 0 and m[i + 1] != m[i]]
+        if not idx:
+            i = int(np.argmin(np.abs(m - mu)))
+            return self.x0[i].copy(), float(self.period[i]), float(z1[i])
+        i = idx[0]
+        w = (mu - m[i]) / (m[i + 1] - m[i])
+        return ((1 - w) * self.x0[i] + w * self.x0[i + 1],
+                float((1 - w) * self.period[i] + w * self.period[i + 1]),
+                float((1 - w) * z1[i] + w * z1[i + 1]))
+
 
 @dataclass(frozen=True, eq=False)
 class BifurcationDiagram:
@@ -378,6 +410,11 @@ def _refine_fold(corr: _Corrector, path: _Path, k: int):
         return None
 
 
+def _padded(count: int) -> int:
+    """The smallest power of two not below ``count``."""
+    return 1 << max(0, (count - 1).bit_length())
+
+
 def _assemble(system: System, path: _Path, hopf: HopfPoint, corr: _Corrector, n_points: int,
               rtol: float, atol: float, runtime_start: float, steps: int) -> BifurcationDiagram:
     n = system.n_states
@@ -411,8 +448,13 @@ def _assemble(system: System, path: _Path, hopf: HopfPoint, corr: _Corrector, n_
     p = param_tree(system)
     obs = list(system.observed_index)
     all_y = np.array([y for ys, _ in pieces for y in ys])
-    orbits_all = np.asarray(k.sample_batch(jnp.asarray(all_y[:, :n]), jnp.asarray(all_y[:, n]),
-                                           jnp.asarray(all_y[:, n + 1]), p, int(n_points)))
+    # padded to a power of two (the last row repeated, dropped after): one compiled
+    # program serves every path of up to that many points, not one per length
+    padded = np.concatenate([all_y, np.repeat(all_y[-1:], _padded(len(all_y)) - len(all_y),
+                                              axis=0)])
+    orbits_all = np.asarray(k.sample_batch(jnp.asarray(padded[:, :n]), jnp.asarray(padded[:, n]),
+                                           jnp.asarray(padded[:, n + 1]), p,
+                                           int(n_points)))[:len(all_y)]
     branches = []
     folds = []
     i0 = 0
@@ -492,30 +534,11 @@ def _orbit_on(branch: Branch, mu: float, n_points: int | None) -> PeriodicOrbit:
     """The orbit at ``mu``: the branch's own where it has one (``solved``), else Newton's."""
     system = branch.system
     mu = float(mu)
-    lo, hi = branch.mu_span
-    u = system.parameter_units
-    if not lo <= mu <= hi:
-        raise SimulationError(
-            f"{branch.kind} branch of {system.name}: no LCO at {system.parameter} = {mu:g}"
-            f"{' ' + u if u else ''}; it exists for {lo:.4g} <= {system.parameter} <= "
-            f"{hi:.4g}{' ' + u if u else ''}"
-        )
+    x0, T, guess = branch.guess(mu)       # raises outside the branch's span
     n_points = branch.orbits.shape[1] if n_points is None else n_points
     solved = branch.solved.get((mu, int(n_points)))
     if solved is not None:
         return solved
-    m = branch.mu
-    z1 = branch.amplitude[system.observed[0]]
-    idx = [i for i in range(len(m) - 1) if (m[i] - mu) * (m[i + 1] - mu) <= 0 and m[i + 1] != m[i]]
-    if idx:  # linear interpolation between the two continuation points that bracket mu
-        i = idx[0]
-        w = (mu - m[i]) / (m[i + 1] - m[i])
-        x0 = (1 - w) * branch.x0[i] + w * branch.x0[i + 1]
-        T = (1 - w) * branch.period[i] + w * branch.period[i + 1]
-        guess = (1 - w) * z1[i] + w * z1[i + 1]
-    else:
-        i = int(np.argmin(np.abs(m - mu)))
-        x0, T, guess = branch.x0[i], branch.period[i], z1[i]
     orbit = periodic_orbit(system, mu, x0, T, n_points=n_points)
     # the corrected orbit must be the one interpolated, not one of another branch
     got = orbit.amplitude[system.observed[0]]
