@@ -55,6 +55,19 @@ def main(argv):
                           segment_periods=settings.segment_periods)
     loo = leave_one_out(f, "subcritical", methods=("bayes",), seed=0, settings=settings,
                         keep_fits=True, progress=True)
+    res = {"label": label, **score(loo, f)}
+    OUT.mkdir(exist_ok=True)
+    (OUT / f"loo_rig_{label}.json").write_text(json.dumps(res, indent=1, default=float))
+    print(label, res["inside"], "/", res["n"], "width", res["mean_width"], "lpd",
+          res["log_predictive_density"])
+
+
+def score(loo, f) -> dict:
+    """Inside count, mean width and summed log predictive density of held-out amplitudes.
+
+    ``loo``: :func:`bayeshopf.validation.leave_one_out`'s result with its refits
+    kept; ``f``: the features it was made from.
+    """
     rows = []
     for i, fold in enumerate(loo.folds):
         p = fold.predictions["bayes"]
@@ -68,13 +81,10 @@ def main(argv):
                      "measured": fold.measured, "median": p.median, "lo": p.lo, "hi": p.hi,
                      "inside": bool(p.lo <= fold.measured <= p.hi), "log_density": lpd,
                      "mu0": list(p.mu0), "mu_fold": list(p.mu_fold)})
-    res = {"label": label, "inside": sum(r["inside"] for r in rows), "n": len(rows),
-           "mean_width": float(np.mean([r["hi"] - r["lo"] for r in rows])),
-           "log_predictive_density": float(sum(r["log_density"] for r in rows)), "folds": rows}
-    OUT.mkdir(exist_ok=True)
-    (OUT / f"loo_rig_{label}.json").write_text(json.dumps(res, indent=1, default=float))
-    print(label, res["inside"], "/", res["n"], "width", res["mean_width"], "lpd",
-          res["log_predictive_density"])
+    return {"inside": sum(r["inside"] for r in rows), "n": len(rows),
+            "mean_width": float(np.mean([r["hi"] - r["lo"] for r in rows])),
+            "log_predictive_density": float(sum(r["log_density"] for r in rows)),
+            "folds": rows}
 
 
 if __name__ == "__main__":
