@@ -259,6 +259,25 @@ def test_flutter_orbit_closes_under_solve_ivp(flutter, mu, branch):
     assert np.all(np.abs(sol.y.T - orbit.states) < 1e-7 * scale)
 
 
+@pytest.mark.parametrize("mu, branch", [(16.3, "unstable"), (17.7, "stable")])
+def test_branch_guess_is_near_the_orbit_newton_finds_there(flutter, mu, branch):
+    # the start the discrepancy analysis solves its batch of orbits from
+    b = flutter.branch(branch)
+    x0, period, ptp = b.guess(mu)
+    orbit = b.orbit(mu)
+    scale = np.abs(orbit.states).max(axis=0)
+    # interpolated between continuation points (the nearest point alone is off by more)
+    assert np.all(np.abs(x0 - orbit.x0) < 2e-3 * scale)
+    assert period == pytest.approx(orbit.period, rel=1e-5)
+    assert ptp == pytest.approx(orbit.amplitude["h"], rel=5e-4)
+    # at a continuation point, that point itself
+    i = len(b.mu) // 2
+    x_i, T_i, _ = b.guess(b.mu[i])
+    assert np.array_equal(x_i, b.x0[i]) and T_i == b.period[i]
+    with pytest.raises(SimulationError, match=r"no LCO at U = 19 m/s; it exists for 14\.9"):
+        flutter.branch("unstable").guess(19.0)
+
+
 def test_orbit_outside_branch_is_one_line_error(flutter):
     with pytest.raises(SimulationError, match=r"no LCO at U = 19 m/s; it exists for 14\.9"):
         orbit_at(flutter, 19.0, "unstable")

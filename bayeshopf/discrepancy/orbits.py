@@ -52,7 +52,7 @@ import numpy as np
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.discrepancy.programs import program
 from bayeshopf.simulators.base import System
-from bayeshopf.simulators.periodic import floquet_stable, kernels, split_shot
+from bayeshopf.simulators.periodic import batch_size, floquet_stable, kernels, split_shot
 
 __all__ = ["OrbitBatch", "sensitivities", "solve_orbits", "track"]
 
@@ -104,7 +104,7 @@ def _batched_call(system: System, name: str, arrays: Sequence, p: dict, *static)
     (:mod:`bayeshopf.discrepancy.programs`).
     """
     R = len(arrays[0])
-    B = 1 << max(0, (R - 1).bit_length())
+    B = batch_size(R)
     padded = tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], B - R, axis=0)])
                                if B > R else a) for a in (np.asarray(a) for a in arrays))
     fn = program(system.rhs, name, lambda: _MAKERS[name](system, *static), (*padded, p),

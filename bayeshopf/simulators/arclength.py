@@ -53,6 +53,7 @@ from bayeshopf.simulators.periodic import (
     RTOL,
     PeriodicOrbit,
     _sorted_multipliers,
+    batch_size,
     floquet_stable,
     kernels,
     param_tree,
@@ -410,11 +411,6 @@ def _refine_fold(corr: _Corrector, path: _Path, k: int):
         return None
 
 
-def _padded(count: int) -> int:
-    """The smallest power of two not below ``count``."""
-    return 1 << max(0, (count - 1).bit_length())
-
-
 def _assemble(system: System, path: _Path, hopf: HopfPoint, corr: _Corrector, n_points: int,
               rtol: float, atol: float, runtime_start: float, steps: int) -> BifurcationDiagram:
     n = system.n_states
@@ -448,9 +444,9 @@ def _assemble(system: System, path: _Path, hopf: HopfPoint, corr: _Corrector, n_
     p = param_tree(system)
     obs = list(system.observed_index)
     all_y = np.array([y for ys, _ in pieces for y in ys])
-    # padded to a power of two (the last row repeated, dropped after): one compiled
-    # program serves every path of up to that many points, not one per length
-    padded = np.concatenate([all_y, np.repeat(all_y[-1:], _padded(len(all_y)) - len(all_y),
+    # padded (the last row repeated, dropped after): one compiled program serves
+    # every path of up to that many points, not one per length
+    padded = np.concatenate([all_y, np.repeat(all_y[-1:], batch_size(len(all_y)) - len(all_y),
                                               axis=0)])
     orbits_all = np.asarray(k.sample_batch(jnp.asarray(padded[:, :n]), jnp.asarray(padded[:, n]),
                                            jnp.asarray(padded[:, n + 1]), p,

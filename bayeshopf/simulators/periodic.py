@@ -41,7 +41,16 @@ import numpy as np
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
 
-__all__ = ["PeriodicOrbit", "floquet_stable", "periodic_orbit", "sample_orbit"]
+__all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "periodic_orbit", "sample_orbit"]
+
+def batch_size(count: int) -> int:
+    """The batch that ``count`` orbits are padded to: the smallest power of two not below it.
+
+    A batched program compiles once per shape, so padding (repeating the last
+    orbit, dropped from the result) lets one program serve every count up to it.
+    """
+    return 1 << max(0, (count - 1).bit_length())
+
 
 #: Default tolerances of the adaptive solver.
 RTOL, ATOL = 1e-10, 1e-12
