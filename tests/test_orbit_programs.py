@@ -1,4 +1,4 @@
-"""The orbits' programs stored across processes (bayeshopf.discrepancy.programs)."""
+"""The orbits' programs stored across processes (bayeshopf.simulators.compiled)."""
 
 import os
 import subprocess
@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 
-from bayeshopf.discrepancy import programs
 from bayeshopf.discrepancy.terms import library, library_system
 from bayeshopf.simulators import FLUTTER3DOF
+from bayeshopf.simulators import compiled as programs
 from bayeshopf.simulators.flutter import flutter_rhs
 
 
@@ -78,3 +78,36 @@ def test_the_library_systems_programs_are_traced_by_the_first_process_only(tmp_p
     assert n_raised >= 1 and n_again >= 1
     assert not list(other.glob("bayeshopf-exported-orbits-flow-*.bin"))
     np.testing.assert_array_equal(raised, again)
+
+
+_CONTINUATION = """
+import numpy as np
+from jax import monitoring
+from bayeshopf.cli.main import prepare_runtime
+prepare_runtime()
+traced = []
+monitoring.register_event_duration_secs_listener(
+    lambda event, duration, **kw: traced.append(kw.get("fun_name"))
+    if event.endswith("jaxpr_trace_duration") else None)
+from bayeshopf.simulators import FLUTTER3DOF
+from bayeshopf.simulators.arclength import continue_from_hopf
+system = FLUTTER3DOF.with_params(k_h=1.02 * FLUTTER3DOF.params["k_h"])   # not a stored diagram
+d = continue_from_hopf(system)
+print(repr([float(d.folds[0].mu), float(d.branches[-1].orbits[-1, 7, 0])]),
+      traced.count("shoot") + traced.count("states"))
+"""
+
+
+def test_a_continuations_programs_are_traced_by_the_first_process_only(tmp_path):
+    env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(tmp_path)}
+    runs = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", _CONTINUATION], env=env, capture_output=True,
+                             text=True, check=True).stdout.strip().splitlines()[-1]
+        values, count = out.rsplit(" ", 1)
+        runs.append((eval(values), int(count)))      # noqa: S307 - our own list of floats
+    (first, n_first), (second, n_second) = runs
+    assert n_first >= 2 and n_second == 0
+    assert first == second
+    assert list(tmp_path.glob("bayeshopf-exported-orbits-shot-*.bin"))
+    assert list(tmp_path.glob("bayeshopf-exported-orbits-states-*.bin"))

@@ -50,8 +50,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
-from bayeshopf.discrepancy.programs import program
 from bayeshopf.simulators.base import System
+from bayeshopf.simulators.compiled import program
 from bayeshopf.simulators.periodic import batch_size, floquet_stable, kernels, split_shot
 
 __all__ = ["OrbitBatch", "sensitivities", "solve_orbits", "track"]
@@ -101,7 +101,7 @@ def _batched_call(system: System, name: str, arrays: Sequence, p: dict, *static)
     leaf, as NumPy arrays), so the compiled programs see one shape per power of
     two rather than one per number of orbits that a homotopy retries; they are
     stored across processes where the system's code allows
-    (:mod:`bayeshopf.discrepancy.programs`).
+    (:mod:`bayeshopf.simulators.compiled`).
     """
     R = len(arrays[0])
     B = batch_size(R)

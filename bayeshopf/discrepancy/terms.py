@@ -82,8 +82,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
-from bayeshopf.discrepancy import programs
 from bayeshopf.errors import BayesHopfError
+from bayeshopf.simulators import compiled as programs
 from bayeshopf.simulators.base import System
 
 __all__ = ["DISSIPATIVE", "KINDS", "Library", "Term", "library", "library_system",

@@ -53,12 +53,12 @@ from bayeshopf.simulators.periodic import (
     RTOL,
     PeriodicOrbit,
     _sorted_multipliers,
-    batch_size,
     floquet_stable,
     kernels,
     param_tree,
     periodic_orbit,
     refined_ptp,
+    sample_batch,
     shoot,
 )
 
@@ -440,17 +440,10 @@ def _assemble(system: System, path: _Path, hopf: HopfPoint, corr: _Corrector, n_
     ms = ([prev_fold[1]] if prev_fold is not None else []) + monos[start:]
     pieces.append((ys, ms))
 
-    k = kernels(system, rtol, atol)
-    p = param_tree(system)
     obs = list(system.observed_index)
     all_y = np.array([y for ys, _ in pieces for y in ys])
-    # padded (the last row repeated, dropped after): one compiled program serves
-    # every path of up to that many points, not one per length
-    padded = np.concatenate([all_y, np.repeat(all_y[-1:], batch_size(len(all_y)) - len(all_y),
-                                              axis=0)])
-    orbits_all = np.asarray(k.sample_batch(jnp.asarray(padded[:, :n]), jnp.asarray(padded[:, n]),
-                                           jnp.asarray(padded[:, n + 1]), p,
-                                           int(n_points)))[:len(all_y)]
+    orbits_all = sample_batch(system, all_y[:, :n], all_y[:, n], all_y[:, n + 1], n_points,
+                              rtol=rtol, atol=atol)
     branches = []
     folds = []
     i0 = 0

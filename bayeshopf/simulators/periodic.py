@@ -40,8 +40,10 @@ import numpy as np
 
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
+from bayeshopf.simulators.compiled import program
 
-__all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "periodic_orbit", "sample_orbit"]
+__all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "periodic_orbit", "sample_batch",
+           "sample_orbit"]
 
 def batch_size(count: int) -> int:
     """The batch that ``count`` orbits are padded to: the smallest power of two not below it.
@@ -183,9 +185,10 @@ def shoot(system: System, x0, T, mu, *, rtol: float = RTOL, atol: float = ATOL) 
     ensure_x64()
     k = kernels(system, rtol, atol)
     n = system.n_states
-    out = np.asarray(k.shoot(jnp.asarray(x0, dtype=jnp.float64),
-                             jnp.asarray(T, dtype=jnp.float64),
-                             jnp.asarray(mu, dtype=jnp.float64), param_tree(system)))
+    args = (jnp.asarray(x0, dtype=jnp.float64), jnp.asarray(T, dtype=jnp.float64),
+            jnp.asarray(mu, dtype=jnp.float64), param_tree(system))
+    fn = program(system.rhs, "shot", lambda: k.shoot, args, (rtol, atol, MAX_STEPS))
+    out = np.asarray(fn(*args))
     s = split_shot(out, n)
     return s._replace(ok=bool(s.ok))
 
@@ -194,11 +197,34 @@ def sample_orbit(system: System, x0, T, mu, n_points: int = N_POINTS, *,
                  rtol: float = RTOL, atol: float = ATOL) -> np.ndarray:
     """States at ``t_k = k T / n_points``, ``k = 0..n_points−1``, shape ``(n_points, n)``."""
     ensure_x64()
+    return np.asarray(sample_batch(system, np.asarray(x0, np.float64)[None],
+                                   np.atleast_1d(np.float64(T)), np.atleast_1d(np.float64(mu)),
+                                   n_points, rtol=rtol, atol=atol)[0])
+
+
+def sample_batch(system: System, x0, T, mu, n_points: int = N_POINTS, *,
+                 rtol: float = RTOL, atol: float = ATOL) -> np.ndarray:
+    """:func:`sample_orbit` of ``R`` orbits at once, shape ``(R, n_points, n)``.
+
+    The orbits are padded to :func:`batch_size` (the last repeated), so that one
+    compiled program serves every number of orbits up to it, and it is stored
+    across processes where the system's code allows
+    (:mod:`bayeshopf.simulators.compiled`).
+    """
+    ensure_x64()
     k = kernels(system, rtol, atol)
-    return np.asarray(k.sample(jnp.asarray(x0, dtype=jnp.float64),
-                               jnp.asarray(T, dtype=jnp.float64),
-                               jnp.asarray(mu, dtype=jnp.float64), param_tree(system),
-                               int(n_points)))
+    R = len(x0)
+    pad = batch_size(R) - R
+    args = tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], pad, axis=0)]))
+                 for a in (np.asarray(x0, np.float64), np.asarray(T, np.float64),
+                           np.asarray(mu, np.float64))) + (param_tree(system),)
+    n_points = int(n_points)
+
+    def states(x, t, m, p):
+        return k.sample_batch(x, t, m, p, n_points)
+
+    fn = program(system.rhs, "states", lambda: states, args, (rtol, atol, MAX_STEPS, n_points))
+    return np.asarray(fn(*args))[:R]
 
 
 def floquet_stable(multipliers: np.ndarray, tol: float = 1e-6) -> bool:

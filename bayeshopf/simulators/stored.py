@@ -36,6 +36,7 @@ import numpy as np
 
 from bayeshopf.simulators.arclength import BifurcationDiagram, Branch, Fold
 from bayeshopf.simulators.base import System
+from bayeshopf.simulators.compiled import key_of
 from bayeshopf.simulators.equilibria import HopfPoint
 from bayeshopf.simulators.periodic import PeriodicOrbit
 
@@ -73,10 +74,10 @@ def system_key(system: System) -> str | None:
 
 def _function_name(f) -> str | None:
     """``module:name`` of a module-level function of bayeshopf.simulators, else ``None``."""
-    module, qualname = getattr(f, "__module__", "") or "", getattr(f, "__qualname__", "<locals>")
-    if not module.startswith("bayeshopf.simulators") or "<locals>" in qualname:
+    key = key_of(f)
+    if key is None or len(key) != 1 or not key[0].startswith("bayeshopf.simulators."):
         return None
-    return f"{module}:{qualname}"
+    return key[0]
 
 
 def stored_path(system: System, folder: Path = FOLDER) -> Path:

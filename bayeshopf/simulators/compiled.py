@@ -1,12 +1,11 @@
-"""The orbits' compiled programs, stored across processes where their code has a key.
+"""Periodic orbits' compiled programs, stored across processes where their code has a key.
 
 JAX's persistent cache skips XLA's compilation of a program it has seen, but
 not the tracing of the Python function and its lowering, which for a diffrax
-solve with its variational equations takes seconds per program and batch size,
-in every process. The batched programs of :mod:`bayeshopf.discrepancy.orbits`
-(the shot, the field, the samples and the flow's derivatives) therefore go
-through :func:`bayeshopf.inference.cache.compiled_function`: exported once
-with :mod:`jax.export` and loaded by later processes, when the right-hand side's
+solve with its variational equations takes about a second per program and
+batch size, in every process. The periodic orbits' programs therefore go
+through :func:`bayeshopf.inference.cache.compiled_function`: exported once with
+:mod:`jax.export` and loaded by later processes, when the right-hand side's
 code is pinned down by a key:
 
 - a module-level function of bayeshopf (its source is part of every stored
@@ -14,9 +13,12 @@ code is pinned down by a key:
 - a closure registered with :func:`register` under a key of its own (the term
   library's system, :func:`bayeshopf.discrepancy.terms.library_system`).
 
-Any other right-hand side (a user's simulator, a planted effect) is traced in
-every process, as before, and so is every program when the persistent cache is
-off or a program cannot be exported.
+Their users: the continuation's shots and samples
+(:mod:`bayeshopf.simulators.periodic`, :mod:`bayeshopf.simulators.arclength`)
+and the discrepancy analysis's batched programs
+(:mod:`bayeshopf.discrepancy.orbits`). Any other right-hand side (a user's
+simulator, a planted effect) is traced in every process, and so is every
+program when the persistent cache is off or a program cannot be exported.
 """
 
 from __future__ import annotations
