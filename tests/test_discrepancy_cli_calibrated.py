@@ -172,11 +172,12 @@ def test_diagram_title_names_terms_then_parameters_and_wraps():
 
     params = ["k_h", "k_alpha", "c_h", "c_alpha", "c3", "k_alpha2", "k_alpha3", "c0", "c1"]
     title = diagram_title({"kind": "term missing", "parameters": params,
-                           "terms": ["h_quadratic_damping", "h_cubic_damping"]}, width=56)
+                           "terms": ["h_quadratic_damping", "alpha_cubic_damping"]}, width=56)
     lines = title.splitlines()
-    assert lines[0] == "term missing: h_quadratic_damping + h_cubic_damping"
-    assert lines[1].startswith("9 parameters off: k_h, k_alpha")
-    assert len(lines) == 3 and max(map(len, lines)) <= 56
+    assert lines[0] == "term missing: quadratic damping in heave + cubic damping"
+    assert lines[1] == "in pitch"
+    assert lines[2].startswith("9 parameters off: k_h, k_alpha")
+    assert len(lines) == 4 and max(map(len, lines)) <= 56
     assert diagram_title({"kind": "none", "terms": [], "parameters": []}) == "none"
 
 

@@ -102,7 +102,8 @@ def with_calibration(recordings: RecordingSet, system: System, prepared: Prepare
         stage, label = "after", f"calibrated + {named['name']}"
         final_params = named["parameters"]
         extras.update(after=after_pts, after_orbits=named["orbits"],
-                      after_label=f"simulator calibrated + {named['name']}",
+                      after_label="simulator calibrated + "
+                      + " and ".join(t.plain for t, _, _ in named["terms"]),
                       intermediate={"label": "simulator calibrated", "diagram":
                                     cal_pts.get("diagram"), "orbits": cal.orbits})
     else:

@@ -184,5 +184,5 @@ def single_terms(system: System, prepared: Prepared, *, seed: int, progress: boo
     }
     extras = {"features": mf, "fitter": fitter, "base": base, "before": before_pts,
               "after": after_pts, "e0": e0, "probabilities": probs,
-              "after_orbits": best.orbits, "after_label": f"simulator + {t.name}"}
+              "after_orbits": best.orbits, "after_label": f"simulator + {t.plain}"}
     return data, fits, extras

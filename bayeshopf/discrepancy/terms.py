@@ -86,7 +86,7 @@ from bayeshopf.errors import BayesHopfError
 from bayeshopf.simulators import compiled as programs
 from bayeshopf.simulators.base import System
 
-__all__ = ["DISSIPATIVE", "KINDS", "Library", "Term", "library", "library_system",
+__all__ = ["DISSIPATIVE", "KINDS", "Library", "Term", "library", "library_system", "plain_name",
            "same_force_as", "term_force"]
 
 #: The kinds of term, in the order they are listed.
@@ -111,6 +111,18 @@ _PLAIN = {"quadratic_stiffness": "quadratic stiffness", "cubic_stiffness": "cubi
           "coulomb_friction": "Coulomb friction", "quadratic_damping": "quadratic damping",
           "cubic_damping": "cubic damping"}
 _COORD_WORDS = {"h": "heave", "alpha": "pitch"}
+
+
+def plain_name(name: str) -> str:
+    """A term's name in plain words (``"alpha_cubic_stiffness"`` → ``"cubic stiffness in pitch"``).
+
+    A name that is not ``<coordinate>_<kind>`` of :data:`KINDS` is returned as it is.
+    """
+    kind = next((k for k in KINDS if name.endswith("_" + k)), None)
+    if kind is None:
+        return name
+    coordinate = name[: -len(kind) - 1]
+    return f"{_PLAIN[kind]} in {_COORD_WORDS.get(coordinate, coordinate)}"
 
 
 class TermError(BayesHopfError, ValueError):
@@ -168,7 +180,7 @@ class Term:
     @property
     def plain(self) -> str:
         """Plain words: ``"cubic stiffness in pitch"``."""
-        return f"{_PLAIN[self.kind]} in {_COORD_WORDS.get(self.coordinate, self.coordinate)}"
+        return plain_name(self.name)
 
     def force(self, q, qd, c):
         r"""The generalised force :math:`F_{\text{extra}}(q, \dot q; c)` (module docstring)."""

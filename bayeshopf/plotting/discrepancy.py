@@ -101,10 +101,12 @@ def diagram_title(verdict: dict, width: int = 70) -> str:
     """The verdict in a title: its kind and terms, then the parameters named off.
 
     Lines are wrapped at ``width`` characters, e.g. ``"term missing:
-    h_quadratic_damping + h_cubic_damping"`` over ``"7 parameters off: k_h,
-    k_alpha, …"``.
+    quadratic damping in heave + cubic damping in heave"`` over ``"7 parameters
+    off: k_h, k_alpha, …"``.
     """
-    terms = " + ".join(verdict.get("terms") or [])
+    from bayeshopf.discrepancy.terms import plain_name
+
+    terms = " + ".join(plain_name(t) for t in verdict.get("terms") or [])
     params = list(verdict.get("parameters") or [])
     head = verdict["kind"] + (f": {terms}" if terms else "")
     lines = [head]
@@ -139,7 +141,7 @@ def plot_orbit_residuals(report, ax=None):
     after = report.extras.get("after_orbits")
     label = report.extras.get("after_label")
     if after is None:
-        after, label = report.fits[0].orbits, f"+ {report.fits[0].term.name}"
+        after, label = report.fits[0].orbits, f"+ {report.fits[0].term.plain}"
     ys0 = fitter.features(base)
     ys1 = fitter.features(after)
     off0, off1 = fitter.offsets(base), fitter.offsets(after)
