@@ -45,6 +45,7 @@ from bayeshopf.simulators.compiled import program
 __all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "periodic_orbit", "sample_batch",
            "sample_orbit"]
 
+
 def batch_size(count: int) -> int:
     """The batch that ``count`` orbits are padded to: the smallest power of two not below it.
 
