@@ -28,7 +28,8 @@ def test_only_code_a_key_pins_down_has_a_key():
     assert programs.key_of(library_system(planted, plib).rhs) is None
 
 
-_PROGRAM = """
+#: A subprocess's start: the CLI's runtime, and a list of the functions it traces.
+_TRACING = """
 import sys
 import numpy as np
 from jax import monitoring
@@ -38,6 +39,9 @@ traced = []
 monitoring.register_event_duration_secs_listener(
     lambda event, duration, **kw: traced.append(kw.get("fun_name"))
     if event.endswith("jaxpr_trace_duration") else None)
+"""
+
+_PROGRAM = _TRACING + """
 from bayeshopf.discrepancy import orbits
 from bayeshopf.discrepancy.terms import library, library_system, library_params
 from bayeshopf.simulators import FLUTTER3DOF, bifurcation_diagram
@@ -53,12 +57,13 @@ print(repr(np.ravel(out)[:50].tolist()), traced.count(fun))
 """
 
 
-def _run(cache_dir, eqx_on_error, name, fun):
+def _run(cache_dir, eqx_on_error, *argv, source=_PROGRAM):
+    """``source`` run in a fresh process with ``argv``: its printed values and trace count."""
     env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
     env["BAYESHOPF_CACHE_DIR"] = str(cache_dir)
     if eqx_on_error is not None:
         env["EQX_ON_ERROR"] = eqx_on_error
-    out = subprocess.run([sys.executable, "-c", _PROGRAM, name, fun], env=env, capture_output=True,
+    out = subprocess.run([sys.executable, "-c", source, *argv], env=env, capture_output=True,
                          text=True, check=True).stdout.strip().splitlines()[-1]
     values, count = out.rsplit(" ", 1)
     return np.array(eval(values)), int(count)   # noqa: S307 - our own list of floats
@@ -80,15 +85,7 @@ def test_the_library_systems_programs_are_traced_by_the_first_process_only(tmp_p
     np.testing.assert_array_equal(raised, again)
 
 
-_CONTINUATION = """
-import numpy as np
-from jax import monitoring
-from bayeshopf.cli.main import prepare_runtime
-prepare_runtime()
-traced = []
-monitoring.register_event_duration_secs_listener(
-    lambda event, duration, **kw: traced.append(kw.get("fun_name"))
-    if event.endswith("jaxpr_trace_duration") else None)
+_CONTINUATION = _TRACING + """
 from bayeshopf.simulators import FLUTTER3DOF
 from bayeshopf.simulators.arclength import continue_from_hopf
 system = FLUTTER3DOF.with_params(k_h=1.02 * FLUTTER3DOF.params["k_h"])   # not a stored diagram
@@ -99,15 +96,9 @@ print(repr([float(d.folds[0].mu), float(d.branches[-1].orbits[-1, 7, 0])]),
 
 
 def test_a_continuations_programs_are_traced_by_the_first_process_only(tmp_path):
-    env = {**os.environ, "BAYESHOPF_CACHE_DIR": str(tmp_path)}
-    runs = []
-    for _ in range(2):
-        out = subprocess.run([sys.executable, "-c", _CONTINUATION], env=env, capture_output=True,
-                             text=True, check=True).stdout.strip().splitlines()[-1]
-        values, count = out.rsplit(" ", 1)
-        runs.append((eval(values), int(count)))      # noqa: S307 - our own list of floats
-    (first, n_first), (second, n_second) = runs
+    first, n_first = _run(tmp_path, None, source=_CONTINUATION)
+    second, n_second = _run(tmp_path, None, source=_CONTINUATION)
     assert n_first >= 2 and n_second == 0
-    assert first == second
+    np.testing.assert_array_equal(first, second)
     assert list(tmp_path.glob("bayeshopf-exported-orbits-shot-*.bin"))
     assert list(tmp_path.glob("bayeshopf-exported-orbits-states-*.bin"))

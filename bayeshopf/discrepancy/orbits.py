@@ -52,7 +52,7 @@ import numpy as np
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import System
 from bayeshopf.simulators.compiled import program
-from bayeshopf.simulators.periodic import batch_size, floquet_stable, kernels, split_shot
+from bayeshopf.simulators.periodic import floquet_stable, kernels, padded, split_shot
 
 __all__ = ["OrbitBatch", "sensitivities", "solve_orbits", "track"]
 
@@ -95,7 +95,7 @@ _MAKERS = {
 
 
 def _batched_call(system: System, name: str, arrays: Sequence, p: dict, *static):
-    """Program ``name`` of :data:`_MAKERS` on ``(*arrays, p)``, orbits padded to a power of two.
+    """Program ``name`` of :data:`_MAKERS` on ``(*arrays, p)``, orbits padded (:func:`padded`).
 
     The rows added repeat the last one and are dropped from the result (every
     leaf, as NumPy arrays), so the compiled programs see one shape per power of
@@ -104,12 +104,10 @@ def _batched_call(system: System, name: str, arrays: Sequence, p: dict, *static)
     (:mod:`bayeshopf.simulators.compiled`).
     """
     R = len(arrays[0])
-    B = batch_size(R)
-    padded = tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], B - R, axis=0)])
-                               if B > R else a) for a in (np.asarray(a) for a in arrays))
-    fn = program(system.rhs, name, lambda: _MAKERS[name](system, *static), (*padded, p),
+    rows = padded(*arrays)
+    fn = program(system.rhs, name, lambda: _MAKERS[name](system, *static), (*rows, p),
                  (_RTOL, _ATOL, _MAX_STEPS, N_SAMPLES, *static))
-    return jax.tree_util.tree_map(lambda o: np.asarray(o)[:R], fn(*padded, p))
+    return jax.tree_util.tree_map(lambda o: np.asarray(o)[:R], fn(*rows, p))
 
 
 @dataclass(frozen=True)

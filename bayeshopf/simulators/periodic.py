@@ -42,8 +42,8 @@ from bayeshopf._x64 import ensure_x64
 from bayeshopf.simulators.base import SimulationError, System
 from bayeshopf.simulators.compiled import program
 
-__all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "periodic_orbit", "sample_batch",
-           "sample_orbit"]
+__all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "padded", "periodic_orbit",
+           "sample_batch", "sample_orbit"]
 
 
 def batch_size(count: int) -> int:
@@ -53,6 +53,17 @@ def batch_size(count: int) -> int:
     orbit, dropped from the result) lets one program serve every count up to it.
     """
     return 1 << max(0, (count - 1).bit_length())
+
+
+def padded(*arrays) -> tuple:
+    """``arrays`` (one row per orbit) padded to :func:`batch_size` rows, the last one repeated.
+
+    Returns JAX arrays; a caller keeps the first ``len(arrays[0])`` rows of the result.
+    """
+    rows = [np.asarray(a) for a in arrays]
+    pad = batch_size(len(rows[0])) - len(rows[0])
+    return tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], pad, axis=0)]) if pad else a)
+                 for a in rows)
 
 
 #: Default tolerances of the adaptive solver.
@@ -215,10 +226,8 @@ def sample_batch(system: System, x0, T, mu, n_points: int = N_POINTS, *,
     ensure_x64()
     k = kernels(system, rtol, atol)
     R = len(x0)
-    pad = batch_size(R) - R
-    args = tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], pad, axis=0)]))
-                 for a in (np.asarray(x0, np.float64), np.asarray(T, np.float64),
-                           np.asarray(mu, np.float64))) + (param_tree(system),)
+    args = (*padded(np.asarray(x0, np.float64), np.asarray(T, np.float64),
+                    np.asarray(mu, np.float64)), param_tree(system))
     n_points = int(n_points)
 
     def states(x, t, m, p):
