@@ -447,3 +447,57 @@ def test_terms_the_data_cannot_separate_are_named_together():
     # each of them within a factor 5 of the most probable
     p = rep.probabilities
     assert all(p[k] * 5 >= p[v["model"]] for k in v["indistinguishable"])
+
+
+def test_the_evidences_of_several_whitenings_at_once_are_each_exact():
+    # the τ grid's S whitenings in one call: slice s is y/s_k = A/s_k θ + g/s_k ζ + ε/s_k
+    # against its own exact marginal likelihood
+    from bayeshopf.discrepancy.evidence import _gauss_evidence, _zeta_gaussian
+
+    A, g, y = _linear_problem(2)
+    n, d = A.shape
+    scales = np.array([0.5, 1.0, 3.0])
+    E = np.stack([np.concatenate([y / k, np.zeros(d + 1)]) for k in scales])
+    G = np.stack([np.vstack([-np.column_stack([A, g]) / k, np.eye(d + 1)]) for k in scales])
+    log_z, _, _ = laplace_evidence(E, G)
+    zeta_z, _, _ = _zeta_gaussian(E, G, 0.0, False)
+    pos_z = _gauss_evidence(E, G, np.zeros(d + 1), [d])
+    assert log_z.shape == zeta_z.shape == pos_z.shape == (3,)
+    for s, k in enumerate(scales):
+        cov = (A @ A.T + np.outer(g, g) + k**2 * np.eye(n)) / k**2   # of y/k
+        exact = stats.multivariate_normal(np.zeros(n), cov).logpdf(y / k)
+        assert log_z[s] - 0.5 * n * np.log(2 * np.pi) == pytest.approx(exact, abs=1e-9)
+        assert zeta_z[s] - 0.5 * n * np.log(2 * np.pi) == pytest.approx(exact, abs=1e-9)
+        assert pos_z[s] == pytest.approx(_gauss_evidence(E[s], G[s], np.zeros(d + 1), [d]),
+                                         abs=1e-12)
+    assert np.ptp(log_z) > 1.0                      # the slices differ: no slice reused
+
+
+def test_simulated_features_of_known_orbits_one_at_a_time_and_batched():
+    # two channels of known harmonics, sampled over one period from two different phases;
+    # the features turn channel 0's first harmonic real and positive (C_{c,k} ↦ C e^{-ikφ})
+    from bayeshopf.discrepancy.features import FeatureLayout, simulated
+
+    layout = FeatureLayout.make(("h", "alpha"), 2)
+    assert layout.labels == ("f", "h:Re1", "h:Re2", "h:Im2", "alpha:Re1", "alpha:Im1",
+                             "alpha:Re2", "alpha:Im2", "h:mean", "alpha:mean")
+    n = 64
+    theta = 2 * np.pi * np.arange(n) / n
+
+    def orbit(start):
+        th = theta + start
+        h = 0.3 + 2.0 * np.cos(th + 0.4) + 0.5 * np.cos(2 * th - 1.0)
+        a = -0.1 + 1.5 * np.cos(th + 1.2) + 0.2 * np.sin(2 * th)
+        return np.stack([h, a], axis=1)
+
+    c_a1 = 0.75 * np.exp(1j * (1.2 - 0.4))
+    c_a2 = 0.1 * np.exp(1j * (-np.pi / 2 - 0.8))
+    c_h2 = 0.25 * np.exp(1j * (-1.0 - 0.8))
+    expect = [1.0, c_h2.real, c_h2.imag, c_a1.real, c_a1.imag, c_a2.real, c_a2.imag, 0.3, -0.1]
+    periods = np.array([0.25, 0.4])
+    samples = np.stack([orbit(0.0), orbit(2.1)])
+    batch = simulated(layout, samples, periods)
+    assert batch.shape == (2, layout.size)
+    for i, T in enumerate(periods):
+        np.testing.assert_allclose(batch[i], [1 / T, *expect], atol=1e-12)
+        np.testing.assert_allclose(simulated(layout, samples[i], T), batch[i], atol=1e-15)

@@ -49,7 +49,7 @@ class _HandProblem:
         self.terms, self.n, self.d = (), 1, 1
         ones = np.ones((R, P))
         self.fitter = SimpleNamespace(mf=SimpleNamespace(y=np.zeros((R, P))), mean_cols=[],
-                                      sigma=ones, sigma_at=lambda tau: ones)
+                                      sigma=ones, sigma_at=lambda tau: ones * np.ones_like(tau))
         self.solved = []
 
     def solve(self, x):
@@ -101,7 +101,7 @@ def test_the_model_error_is_inferred_from_what_the_model_achieves_not_what_it_pr
     prob.fitter.sigma_at = lambda tau: np.sqrt(1.0 + (tau * ref) ** 2)
 
     def evidence(x, E, G, ok, penalty):
-        return _model_error(prob.fitter, E, G, ok, lambda Et, Gt: laplace_evidence(Et, Gt)[0],
+        return _model_error(prob.fitter, E, G, ok, lambda Es, Gs: laplace_evidence(Es, Gs)[0],
                             penalty)[0]
 
     ob, E = prob.solve(np.zeros(1))
@@ -110,7 +110,8 @@ def test_the_model_error_is_inferred_from_what_the_model_achieves_not_what_it_pr
     _, _, _, _, charged, pen = _charged(prob, np.zeros(1), ob, E, G, evidence, refined=False)
     as_it_stands = _model_error(
         prob.fitter, E, G, ob.ok,
-        lambda Et, Gt: -0.5 * float(Et @ Et) - 0.5 * np.linalg.slogdet(Gt.T @ Gt)[1])[0]
+        lambda Es, Gs: np.array([-0.5 * float(Et @ Et) - 0.5 * np.linalg.slogdet(Gt.T @ Gt)[1]
+                                 for Et, Gt in zip(Es, Gs, strict=True)]))[0]
     assert charged.median == pytest.approx(as_it_stands.median, rel=1e-9)
     assert charged.log_z == pytest.approx(as_it_stands.log_z, rel=1e-9)
     assert promised.median < 0.5 * charged.median          # the promise asked for less error

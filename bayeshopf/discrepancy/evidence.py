@@ -66,34 +66,47 @@ def laplace_evidence(E: np.ndarray, G: np.ndarray) -> tuple[float, np.ndarray, n
     :math:`H = G^\top G`, :math:`b = G^\top E`.
 
     Args:
-        E: Stacked whitened residuals, shape ``(N,)``.
-        G: Their Jacobian, shape ``(N, d)``.
+        E: Stacked whitened residuals, shape ``(N,)``, or ``(S, N)`` for ``S``
+            whitenings at once.
+        G: Their Jacobian, shape ``(N, d)`` (``(S, N, d)``).
 
     Returns:
         ``(log_z, delta, cov)``: the log evidence, the step to the mode of the
-        linearised model, and the posterior covariance :math:`H^{-1}`.
+        linearised model, and the posterior covariance :math:`H^{-1}`; with a
+        leading ``S`` axis when ``E`` has one.
     """
-    H = G.T @ G
-    b = G.T @ E
+    Gt = np.swapaxes(G, -1, -2)
+    H = Gt @ G
+    b = (Gt @ E[..., None])[..., 0]
     cov = np.linalg.inv(H)
-    log_z = float(-0.5 * (E @ E - b @ cov @ b) - 0.5 * np.linalg.slogdet(H)[1])
-    return log_z, -cov @ b, cov
+    delta = -(cov @ b[..., None])[..., 0]
+    log_z = (-0.5 * (np.sum(E * E, axis=-1) + np.sum(b * delta, axis=-1))
+             - 0.5 * np.linalg.slogdet(H)[1])
+    return (float(log_z) if E.ndim == 1 else log_z), delta, cov
 
 
-def _zeta_gaussian(E: np.ndarray, G: np.ndarray, zeta: float, positive: bool
-                   ) -> tuple[float, float, float]:
-    r"""``(log_z, centre, sd)`` of the last unknown with the others integrated out (analytic)."""
-    Gz, g = G[:, :-1], G[:, -1]
+def _zeta_gaussian(E: np.ndarray, G: np.ndarray, zeta: float, positive: bool):
+    r"""``(log_z, centre, sd)`` of the last unknown with the others integrated out (analytic).
+
+    Floats for ``E`` of shape ``(N,)``; arrays ``(S,)`` for ``(S, N)`` (``S``
+    whitenings at once, ``G`` then ``(S, N, d + 1)``).
+    """
+    Gz, g = G[..., :-1], G[..., -1]
     Q, _ = np.linalg.qr(Gz)
-    a, bb = E - Q @ (Q.T @ E), g - Q @ (Q.T @ g)
-    s2 = float(bb @ bb)
+    Qt = np.swapaxes(Q, -1, -2)
+    a = E - (Q @ (Qt @ E[..., None]))[..., 0]
+    bb = g - (Q @ (Qt @ g[..., None]))[..., 0]
+    s2 = np.sum(bb * bb, axis=-1)
+    ab = np.sum(a * bb, axis=-1)
     sd = 1.0 / np.sqrt(s2)
-    centre = zeta - float(a @ bb) / s2                         # maximum of the quadratic
-    mx = -0.5 * (float(a @ a) - float(a @ bb) ** 2 / s2)
-    log_z = mx - 0.5 * np.log(s2) - 0.5 * np.linalg.slogdet(Gz.T @ Gz)[1]
+    centre = zeta - ab / s2                                     # maximum of the quadratic
+    mx = -0.5 * (np.sum(a * a, axis=-1) - ab**2 / s2)
+    log_z = mx - 0.5 * np.log(s2) - 0.5 * np.linalg.slogdet(np.swapaxes(Gz, -1, -2) @ Gz)[1]
     if positive:
-        log_z += np.log(2.0) + stats.norm.logcdf(centre / sd)
-    return float(log_z), float(centre), float(sd)
+        log_z = log_z + np.log(2.0) + stats.norm.logcdf(centre / sd)
+    if E.ndim == 1:
+        return float(log_z), float(centre), float(sd)
+    return log_z, centre, sd
 
 
 def _zeta_density(grid: np.ndarray, centre: float, sd: float, positive: bool) -> np.ndarray:
@@ -132,14 +145,16 @@ def term_marginal(E: np.ndarray, G: np.ndarray, zeta: float, positive: bool, *,
     return log_z, grid, _zeta_density(grid, centre, sd, positive)
 
 
-def _gauss_evidence(Et: np.ndarray, Gt: np.ndarray, x: np.ndarray, positive: Sequence[int]
-                    ) -> float:
-    """Laplace evidence, each ``positive`` unknown's half-normal prior and bound included."""
+def _gauss_evidence(Et: np.ndarray, Gt: np.ndarray, x: np.ndarray, positive: Sequence[int]):
+    """Laplace evidence, each ``positive`` unknown's half-normal prior and bound included.
+
+    A float for ``Et`` of shape ``(N,)``; ``(S,)`` for ``(S, N)``.
+    """
     lz, delta, cov = laplace_evidence(Et, Gt)
     for k in positive:
-        lz += np.log(2.0) + stats.norm.logcdf((x[k] + delta[k]) / np.sqrt(cov[k, k]))
-    return float(lz)
-
+        lz = lz + np.log(2.0) + stats.norm.logcdf((x[k] + delta[..., k])
+                                                   / np.sqrt(cov[..., k, k]))
+    return float(lz) if Et.ndim == 1 else lz
 
 
 def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, taus
@@ -161,7 +176,7 @@ def _rewhiten(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, taus
     R, P = fitter.mf.y.shape
     taus = np.atleast_1d(np.asarray(taus, float))
     s0 = fitter.sigma
-    s1 = np.stack([fitter.sigma_at(float(t)) for t in taus])                   # (S, R, P)
+    s1 = fitter.sigma_at(taus[:, None, None])                                  # (S, R, P)
     e = E[: R * P].reshape(R, P)
     g = G[: R * P].reshape(R, P, -1)
     ratio = s0 / s1
@@ -190,15 +205,18 @@ def _model_error(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray,
                  evidence, penalty=None) -> tuple[ModelError, np.ndarray]:
     """τ integrated out: ``evidence(E_τ, G_τ)`` at every point of :data:`TAU`.
 
-    ``penalty(τ, E_τ, G_τ)``, when given, is subtracted at each τ (a
+    ``evidence`` maps the re-whitened residuals and Jacobian at every τ,
+    ``(S, N)`` and ``(S, N, n)``, to the log evidences ``(S,)``.
+    ``penalty(taus, E_τ, G_τ)``, when given, is subtracted (``(S,)``: a
     linearisation's charge, which depends on the whitening, so that the
     posterior of τ is that of the charged evidence).
 
     Returns the :class:`ModelError` and the log evidence at each τ.
     """
     Es, Gs, ln = _rewhiten(fitter, E, G, ok, TAU)
-    lz = np.array([evidence(Es[i], Gs[i]) + ln[i] - (penalty(t, Es[i], Gs[i]) if penalty else 0.0)
-                   for i, t in enumerate(TAU)])
+    lz = np.asarray(evidence(Es, Gs), float) + ln
+    if penalty is not None:
+        lz = lz - penalty(TAU, Es, Gs)
     mx = lz.max()
     w = np.exp(lz - mx)
     w /= w.sum()
@@ -219,5 +237,5 @@ def _null(fitter: Fitter, e0: np.ndarray, ok: np.ndarray) -> ModelError:
     """:math:`M_0` (nominal, nothing fitted) with τ integrated out."""
     E = e0.ravel()
     return _model_error(fitter, E, np.zeros((E.size, 0)), ok,
-                        lambda Et, Gt: -0.5 * float(Et @ Et))[0]
+                        lambda Es, Gs: -0.5 * np.sum(Es * Es, axis=-1))[0]
 

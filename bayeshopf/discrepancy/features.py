@@ -95,38 +95,50 @@ class FeatureLayout:
         """Entries per recording."""
         return len(self.labels)
 
-    def pack(self, f: float, C: np.ndarray) -> np.ndarray:
-        """Feature vector from ``f`` and phase-fixed coefficients ``C`` of shape ``(n_ch, K+1)``."""
-        out = [f]
-        for j in range(len(self.channels)):
-            for k in range(1, self.K + 1):
-                out.append(C[j, k].real)
-                if not (j == 0 and k == 1):
-                    out.append(C[j, k].imag)
-        out.extend(C[:, 0].real)
-        return np.asarray(out, dtype=np.float64)
+    def pack(self, f, C: np.ndarray) -> np.ndarray:
+        """Feature vector from ``f`` and phase-fixed coefficients ``C`` of shape ``(n_ch, K+1)``.
+
+        With a leading batch axis (``f`` of shape ``(B,)``, ``C`` of ``(B, n_ch, K+1)``)
+        the vectors are the rows of a ``(B, size)`` array.
+        """
+        C = np.asarray(C)
+        f = np.asarray(f, dtype=np.float64)
+        n_ch, K = len(self.channels), self.K
+        cols = [f[..., None]]
+        for j in range(n_ch):
+            re, im = C[..., j, 1:].real, C[..., j, 1:].imag                # (..., K)
+            pairs = np.stack([re, im], axis=-1).reshape(*re.shape[:-1], 2 * K)
+            cols.append(np.delete(pairs, 1, axis=-1) if j == 0 else pairs)  # C[0, 1] is real
+        cols.append(C[..., :, 0].real)
+        return np.concatenate(cols, axis=-1).astype(np.float64)
 
 
 def _fix_phase(C: np.ndarray) -> np.ndarray:
-    """Turn ``C`` (n_ch, K+1) so that ``C[0, 1]`` is real and positive."""
-    k = np.arange(C.shape[1])
-    return C * np.exp(-1j * k * np.angle(C[0, 1]))[None, :]
+    """Turn ``C`` (..., n_ch, K+1) so that ``C[..., 0, 1]`` is real and positive."""
+    k = np.arange(C.shape[-1])
+    return C * np.exp(-1j * k * np.angle(C[..., 0, 1])[..., None])[..., None, :]
 
 
 def orbit_coefficients(samples: np.ndarray, K: int) -> np.ndarray:
     """Phase-fixed :math:`C_{c,k}` of samples over one period, shape ``(n_ch, K+1)``.
 
     Args:
-        samples: Shape ``(n_points, n_ch)``, uniform in time over one period.
+        samples: Shape ``(n_points, n_ch)``, uniform in time over one period;
+            or ``(B, n_points, n_ch)`` for ``B`` orbits (then ``(B, n_ch, K+1)``).
         K: Harmonics.
     """
-    C = np.fft.rfft(samples, axis=0)[: K + 1].T / samples.shape[0]
-    return _fix_phase(C)
+    C = np.fft.rfft(samples, axis=-2)[..., : K + 1, :] / samples.shape[-2]
+    return _fix_phase(np.swapaxes(C, -1, -2))
 
 
-def simulated(layout: FeatureLayout, samples: np.ndarray, period: float) -> np.ndarray:
-    """The feature vector of a simulated orbit (samples of the observed channels)."""
-    return layout.pack(1.0 / period, orbit_coefficients(samples, layout.K))
+def simulated(layout: FeatureLayout, samples: np.ndarray, period) -> np.ndarray:
+    """The feature vector of a simulated orbit (samples of the observed channels).
+
+    With a leading batch axis (``samples`` ``(B, n_points, n_ch)``, ``period``
+    ``(B,)``), one vector per row.
+    """
+    return layout.pack(1.0 / np.asarray(period, dtype=np.float64),
+                       orbit_coefficients(samples, layout.K))
 
 
 def _design(t: np.ndarray, f: float, K: int) -> np.ndarray:

@@ -144,7 +144,7 @@ def fit_parameters(fitter: Fitter, unc: Sequence[UncertainParameter], *,
     x, ob, E, G, res = minimise(prob, x0, max_nfev)
     jac0 = known[0][1] if known else prob.first[1][: R * P]   # at z = 0, the first one
     def evidence(x, E, G, ok, penalty):
-        return _model_error(fitter, E, G, ok, lambda Et, Gt: laplace_evidence(Et, Gt)[0],
+        return _model_error(fitter, E, G, ok, lambda Es, Gs: laplace_evidence(Es, Gs)[0],
                             penalty)[0]
 
     x, ob, E, G, me, _ = _charged(prob, x, ob, E, G, evidence, refined=True)
@@ -208,7 +208,7 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
 
     def evidence(x, E, G, ok, penalty):
         return _model_error(fitter, E, G, ok,
-                            lambda Et, Gt: _zeta_gaussian(Et, Gt, float(x[d]),
+                            lambda Es, Gs: _zeta_gaussian(Es, Gs, float(x[d]),
                                                           term.positive)[0], penalty)[0]
 
     x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
@@ -308,7 +308,7 @@ def _pair_fit(fitter: Fitter, unc: Sequence[UncertainParameter], terms: tuple[Te
 
     def evidence(x, E, G, ok, penalty):
         return _model_error(fitter, E, G, ok,
-                            lambda Et, Gt: _gauss_evidence(Et, Gt, x, pos), penalty)[0]
+                            lambda Es, Gs: _gauss_evidence(Es, Gs, x, pos), penalty)[0]
 
     x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     Et, Gt = _at_tau(fitter, E, G, ob.ok, me.median)

@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy import optimize
 
-from bayeshopf.discrepancy.evidence import _at_tau, laplace_evidence
+from bayeshopf.discrepancy.evidence import _at_tau, _rewhiten, laplace_evidence
 from bayeshopf.discrepancy.orbits import OrbitBatch, track
 from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.discrepancy.terms import Term
@@ -315,17 +315,20 @@ def charge_at_every_tau(prob: Problem, x: np.ndarray, c: Charge):
     would otherwise pull τ down to where the point ``x`` itself fits badly.
 
     Returns:
-        ``penalty(τ, E_τ, G_τ)`` in nats.
+        ``penalty(taus, E_τ, G_τ)``: the charge in nats at every τ of ``taus``
+        (``(S,)``), given the residuals ``(S, N)`` and Jacobian ``(S, N, n)``
+        whitened at each.
     """
     fitter, lower = prob.fitter, _lower(prob)
     none = np.zeros((c.E.size, 0))
 
-    def penalty(tau: float, Et: np.ndarray, Gt: np.ndarray) -> float:
-        _, delta, _ = laplace_evidence(Et, Gt)
-        xl = np.maximum(x + delta, lower)
-        pred = float(np.sum((Et + Gt @ (xl - x)) ** 2))
-        El = _at_tau(fitter, c.E, none, c.orbits.ok, tau)[0]
-        return 0.5 * max(0.0, min(float(El @ El), float(Et @ Et)) - pred)
+    def penalty(taus: np.ndarray, Es: np.ndarray, Gs: np.ndarray) -> np.ndarray:
+        _, delta, _ = laplace_evidence(Es, Gs)
+        step = np.maximum(x + delta, lower) - x                                 # (S, n)
+        pred = np.sum((Es + (Gs @ step[..., None])[..., 0]) ** 2, axis=-1)
+        El = _rewhiten(fitter, c.E, none, c.orbits.ok, taus)[0]
+        achieved = np.minimum(np.sum(El * El, axis=-1), np.sum(Es * Es, axis=-1))
+        return 0.5 * np.maximum(0.0, achieved - pred)
 
     return penalty
 

@@ -163,8 +163,12 @@ class Fitter:
         self.sigma = self.sigma_at(self.model_error)
         self.mean_cols = [j for j, k in enumerate(lay.kind) if k == "mean"]
 
-    def sigma_at(self, model_error: float) -> np.ndarray:
-        """Standard deviation of every feature, ``(R, P)``, at a relative model error."""
+    def sigma_at(self, model_error: float | np.ndarray) -> np.ndarray:
+        """Standard deviation of every feature, ``(R, P)``, at a relative model error.
+
+        An array of model errors broadcasts against ``(R, P)`` (``(S, 1, 1)``
+        gives ``(S, R, P)``).
+        """
         return np.sqrt(self.noise_var + (model_error * self.ref) ** 2)
 
     def with_model_error(self, model_error: float) -> Fitter:
@@ -174,8 +178,9 @@ class Fitter:
     def features(self, ob: OrbitBatch) -> np.ndarray:
         """Simulated features ``(R, P)`` (NaN rows where an orbit is lost)."""
         out = np.full_like(self.mf.y, np.nan)
-        for i in np.nonzero(ob.ok)[0]:
-            out[i] = simulated(self.mf.layout, ob.states[i][:, self.obs], ob.period[i])
+        ok = np.asarray(ob.ok, bool)
+        if ok.any():
+            out[ok] = simulated(self.mf.layout, ob.states[ok][:, :, self.obs], ob.period[ok])
         return out
 
     def residuals(self, ob: OrbitBatch) -> np.ndarray:
