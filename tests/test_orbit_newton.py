@@ -24,14 +24,14 @@ def diagram():
 
 @pytest.fixture
 def shots(monkeypatch):
-    """Counts the batched shots of every solve."""
+    """The batched shots of every solve: the number of orbits each shoots."""
     count = []
     batched_call = orbits._batched_call
 
-    def counting(system, name, *a):
+    def counting(system, name, arrays, *a):
         if name == "shoot":
-            count.append(1)
-        return batched_call(system, name, *a)
+            count.append(len(arrays[0]))
+        return batched_call(system, name, arrays, *a)
     monkeypatch.setattr(orbits, "_batched_call", counting)
     return count
 
@@ -66,3 +66,24 @@ def test_an_orbit_beyond_the_fold_is_lost_without_iterating_to_the_limit(diagram
     assert np.isnan(ob.states[0]).all() and np.isfinite(ob.states[1]).all()
     # Newton's steps stopped shrinking: stopped long before max_iter shots
     assert len(shots) <= 15
+
+
+def test_an_orbit_is_shot_only_while_it_iterates(diagram, shots):
+    # a start on the orbit converges at once; one further along the branch takes several
+    # steps. Solved together, each is what it is alone, and no orbit is shot once done
+    # (nor is a shot taken when every orbit is done)
+    x0, T, _ = _start(diagram, [15.0, 15.6], "unstable")
+    mu = np.array([15.0, 16.2])
+    together = orbits.solve_orbits(FLUTTER3DOF, FLUTTER3DOF.params, x0, T, mu, [False, False])
+    rows_together = sum(shots)
+    alone, rows_alone = [], []
+    for i in range(2):
+        shots.clear()
+        alone.append(orbits.solve_orbits(FLUTTER3DOF, FLUTTER3DOF.params, x0[i:i + 1],
+                                         T[i:i + 1], mu[i:i + 1], [False]))
+        rows_alone.append(sum(shots))
+    assert together.ok.all() and rows_alone[0] < rows_alone[1]
+    assert rows_together == sum(rows_alone)
+    for i in range(2):
+        np.testing.assert_allclose(together.period[i], alone[i].period[0], rtol=1e-12)
+        np.testing.assert_allclose(together.x0[i], alone[i].x0[0], rtol=1e-10, atol=1e-14)

@@ -166,16 +166,20 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
     alive = np.ones(R, bool)
     mono = np.zeros((R, n, n))
     steps = np.full((max_iter, R), np.inf)          # each iteration's step relative to the size
+    x1, f1 = np.zeros((R, n)), np.zeros((R, n))
     for it in range(max_iter):
-        out = _batched_call(system, "shoot", (x, T, mu), p)
-        x1, phi, _, f1, okr = split_shot(out, n)
-        okr = okr & np.all(np.isfinite(out), axis=1)
-        alive &= okr | done
-        mono = np.where(done[:, None, None], mono, phi)
+        # only the orbits still iterating are shot: a converged one keeps the
+        # monodromy of its last shot, a lost one stays lost
+        idx = np.nonzero(alive & ~done)[0]
+        if idx.size == 0:
+            break
+        out = _batched_call(system, "shoot", (x[idx], T[idx], mu[idx]), p)
+        x1[idx], mono[idx], _, f1[idx], okr = split_shot(out, n)
+        alive[idx] &= okr & np.all(np.isfinite(out), axis=1)
         if (done | ~alive).all():
             break
         A = np.zeros((R, n + 1, n + 1))
-        A[:, :n, :n] = phi - np.eye(n)
+        A[:, :n, :n] = mono - np.eye(n)
         A[:, :n, n] = f1
         A[:, n, :n] = fhat
         r = np.concatenate([x1 - x, np.einsum("ij,ij->i", x - xhat, fhat)[:, None]], axis=1)
@@ -200,7 +204,6 @@ def solve_orbits(system: System, params: dict, x0, period, mu, stable, *,
         small = (np.max(np.abs(d[:, :n]), axis=1) <= tol * (1 + np.max(np.abs(x), axis=1))) & (
             np.abs(d[:, n]) <= tol * np.abs(T))
         done |= act & small & alive
-        # the monodromy of the converged point: one more shot updates it (loop top)
     ok = done & alive
     for i in np.nonzero(ok)[0]:
         if floquet_stable(np.linalg.eigvals(mono[i])) != bool(np.asarray(stable)[i]):
