@@ -132,7 +132,8 @@ class OrbitBatch:
 def _params(p: dict) -> dict:
     """The parameters as float64 NumPy scalars, which the compiled calls take as they are.
 
-    A JAX array per parameter would cost a device transfer each, at every call.
+    A JAX array per parameter would cost a device transfer each, at every call
+    (or, put on the device once per solve, more than a solve's calls save).
     """
     return {k: np.asarray(v, dtype=np.float64) for k, v in p.items()}
 

@@ -58,11 +58,13 @@ def batch_size(count: int) -> int:
 def padded(*arrays) -> tuple:
     """``arrays`` (one row per orbit) padded to :func:`batch_size` rows, the last one repeated.
 
-    Returns JAX arrays; a caller keeps the first ``len(arrays[0])`` rows of the result.
+    Returns NumPy arrays (a compiled program takes them as they are, without a
+    JAX array made per argument first); a caller keeps the first
+    ``len(arrays[0])`` rows of the result.
     """
     rows = [np.asarray(a) for a in arrays]
     pad = batch_size(len(rows[0])) - len(rows[0])
-    return tuple(jnp.asarray(np.concatenate([a, np.repeat(a[-1:], pad, axis=0)]) if pad else a)
+    return tuple(np.concatenate([a, np.repeat(a[-1:], pad, axis=0)]) if pad else a
                  for a in rows)
 
 
