@@ -46,13 +46,22 @@ __all__ = ["PeriodicOrbit", "batch_size", "floquet_stable", "padded", "periodic_
            "sample_batch", "sample_orbit"]
 
 
+#: The smallest batch of more than one orbit: on a CPU a batch of two costs about
+#: as much to run as one of four, and each size is another program to compile.
+MIN_BATCH = 4
+
+
 def batch_size(count: int) -> int:
-    """The batch that ``count`` orbits are padded to: the smallest power of two not below it.
+    """The batch ``count`` orbits are padded to: 1, else a power of two, at least :data:`MIN_BATCH`.
+
+    The power of two is the smallest not below ``count``.
 
     A batched program compiles once per shape, so padding (repeating the last
     orbit, dropped from the result) lets one program serve every count up to it.
     """
-    return 1 << max(0, (count - 1).bit_length())
+    if count <= 1:
+        return 1
+    return max(MIN_BATCH, 1 << (count - 1).bit_length())
 
 
 def padded(*arrays) -> tuple:
