@@ -171,14 +171,12 @@ def unexplained(cal: Calibration) -> Unexplained:
     rows = {j: found * P + j for j in cols}
     taus = TAU[::TAU_STRIDE]
     lz = np.empty((taus.size, N_ETA, N_ELL))
-    lz0 = np.empty(taus.size)
     Es, Gs, lns = _rewhiten(fitter, E, G, ok, taus)
-    for a, tau in enumerate(taus):
-        Et, Gt, ln = Es[a], Gs[a], lns[a]
-        lz0[a] = laplace_evidence(Et, Gt)[0] + ln
-        s1 = fitter.sigma_at(float(tau))
-        W = {j: fitter.ref[found, j] / s1[found, j] for j in cols}
-        lz[a] = evidence_grid(Et, Gt, rows, W, etas, kernels) + ln
+    lz0 = laplace_evidence(Es, Gs)[0] + lns
+    s1 = fitter.sigma_at(taus[:, None, None])                               # (S, R, P)
+    for a in range(taus.size):
+        W = {j: fitter.ref[found, j] / s1[a, found, j] for j in cols}
+        lz[a] = evidence_grid(Es[a], Gs[a], rows, W, etas, kernels) + lns[a]
     # τ's grid points have equal prior weight; η's and ℓ's carry their cells' prior mass
     lw = (np.log(np.maximum(p_eta, 1e-300))[None, :, None]
           + np.log(np.maximum(p_ell, 1e-300))[None, None, :])
