@@ -1,8 +1,8 @@
 r"""Periodic orbits of a system at many (μ, parameter) points at once, warm-started.
 
 For recordings at :math:`\mu_1..\mu_R` the orbits are solved together: one
-vectorised (``jax.vmap``) shooting solve per Newton iteration integrates all
-:math:`R` orbits with their monodromy matrices. Newton's method solves, per
+vectorised (``jax.vmap``) shooting solve per Newton iteration integrates the
+orbits still iterating with their monodromy matrices. Newton's method solves, per
 orbit, :math:`\varphi_T(x_0) - x_0 = 0` and :math:`(x_0 - \hat x)\cdot f(\hat x) = 0`
 (:mod:`bayeshopf.simulators.periodic`) from a warm start
 :math:`(\hat x, \hat T)`. Changing a coefficient of the system is a
@@ -132,8 +132,8 @@ class OrbitBatch:
 def _params(p: dict) -> dict:
     """The parameters as float64 NumPy scalars, which the compiled calls take as they are.
 
-    A JAX array per parameter would cost a device transfer each, at every call
-    (or, put on the device once per solve, more than a solve's calls save).
+    A JAX array per parameter would cost a device transfer each, at every call;
+    putting them on the device once per solve costs more than its calls save.
     """
     return {k: np.asarray(v, dtype=np.float64) for k, v in p.items()}
 
