@@ -64,6 +64,7 @@ from bayeshopf.discrepancy.evidence import (
     _at_tau,
     _gauss_evidence,
     _model_error,
+    _rewhiten,
     _zeta_density,
     _zeta_gaussian,
     laplace_evidence,
@@ -108,12 +109,10 @@ def _coefficients(fitter: Fitter, E: np.ndarray, G: np.ndarray, ok: np.ndarray, 
     A :class:`~bayeshopf.discrepancy.nested.CoefficientPosterior`, for Savage–Dickey.
     """
     keep = np.nonzero(me.weights > 1e-12 * me.weights.max())[0]
-    parts = [gaussian_marginal(*_at_tau(fitter, E, G, ok, TAU[k]), x, len(terms))
-             for k in keep]
+    Es, Gs, _ = _rewhiten(fitter, E, G, ok, TAU[keep])
+    means, covs = gaussian_marginal(Es, Gs, x, len(terms))
     w = me.weights[keep]
-    return CoefficientPosterior(w / w.sum(), np.array([m for m, _ in parts]),
-                                np.array([C for _, C in parts]),
-                                tuple(t.positive for t in terms))
+    return CoefficientPosterior(w / w.sum(), means, covs, tuple(t.positive for t in terms))
 
 
 def fit_parameters(fitter: Fitter, unc: Sequence[UncertainParameter], *,
@@ -214,8 +213,9 @@ def _term_fit(prob: Problem, x: np.ndarray, ob: OrbitBatch, E: np.ndarray, G: np
     x, ob, E, G, me, penalty = _charged(prob, x, ob, E, G, evidence, refined)
     zeta = float(x[d])
     keep = np.nonzero(me.weights > 1e-6 * me.weights.max())[0]
-    parts = [_zeta_gaussian(*_at_tau(fitter, E, G, ob.ok, TAU[k]), zeta, term.positive)[1:]
-             for k in keep]
+    Es, Gs, _ = _rewhiten(fitter, E, G, ob.ok, TAU[keep])
+    _, centres, sds = _zeta_gaussian(Es, Gs, zeta, term.positive)
+    parts = [(float(c), float(sd)) for c, sd in zip(centres, sds, strict=True)]
     lo = min(c - 6 * sd for c, sd in parts)
     lo = max(lo, 0.0) if term.positive else lo
     grid = np.linspace(lo, max(max(c + 6 * sd for c, sd in parts), lo + 1e-12), 2 * GRID - 1)

@@ -187,12 +187,14 @@ def gaussian_marginal(E: np.ndarray, G: np.ndarray, x: np.ndarray, k: int
 
     ``E`` and ``G`` include the standard normal prior rows; the posterior is
     :math:`\mathcal N(x + \delta, H^{-1})`, :math:`H = G^\top G`,
-    :math:`\delta = -H^{-1}G^\top E`.
+    :math:`\delta = -H^{-1}G^\top E`. With a leading axis of whitenings
+    (``E`` of shape ``(S, N)``, ``G`` of ``(S, N, n)``) the means and
+    covariances have it too.
     """
-    H = G.T @ G
-    cov = np.linalg.inv(H)
-    delta = -cov @ (G.T @ E)
-    return (np.asarray(x, float)[-k:] + delta[-k:]), cov[-k:, -k:]
+    Gt = np.swapaxes(G, -1, -2)
+    cov = np.linalg.inv(Gt @ G)
+    delta = -(cov @ (Gt @ E[..., None]))[..., 0]
+    return (np.asarray(x, float)[-k:] + delta[..., -k:]), cov[..., -k:, -k:]
 
 
 #: Gauss–Legendre nodes and weights on [0, 1] of each panel of :func:`_orthant2`.
