@@ -48,7 +48,6 @@ from dataclasses import dataclass, field, replace
 import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.stats import binom, gaussian_kde
 from tqdm.auto import tqdm
 
 from bayeshopf._x64 import ensure_x64
@@ -150,6 +149,8 @@ class HeldOutFold:
         ``gaussian_kde``, Scott's bandwidth) at the measured amplitude, times the
         share of draws in which the branch exists there (``-inf`` where none).
         """
+        from scipy.stats import gaussian_kde  # slow to import; a fit needs it only here
+
         p = self.predictions[method]
         d = p.draws
         if d is None or np.size(d) < 2 or np.ptp(d) == 0:
@@ -195,6 +196,8 @@ class LeaveOneOut:
         recordings or fewer; small values (below 0.05, say) mean the bands are
         too narrow.
         """
+        from scipy.stats import binom  # slow to import; a fit needs it only here
+
         return float(binom.cdf(self.coverage(method), len(self.folds), CI))
 
     def held_out_scale(self, method: str = "bayes") -> float:

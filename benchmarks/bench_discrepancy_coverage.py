@@ -4,7 +4,9 @@ Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs pai
 [--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for chosen seeds); ``--summary
 [FIRST LAST] [--seeds …] [--models …]`` prints the table of what finished, over the
 sets that every listed model fitted, with each coverage's 90% Clopper–Pearson interval
-(and, with ``kernel_w``, the misses among the sets its fit's window check flags).
+(and, with ``kernel_w``, the misses among the sets its fit's window check flags), and
+each model's coverage among the fits that warn of a relative model error above the
+limit and among the rest.
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
@@ -188,6 +190,35 @@ def summary(seeds=None, models=None) -> None:
                           f"{score:.3f}"]
             print(f"| {design} | {model} | {len(sub)} | " + " | ".join(cells) + " |")
     flagged_misses(rows, models)
+    warned_split(rows, models)
+
+
+#: The fit check's warning that the model misses the orbits (relative model error above
+#: the limit, :mod:`bayeshopf.diagnostics.fit_checks`), as it begins in every model.
+WARNING = "relative model error"
+
+
+def warned_split(rows, models) -> None:
+    """Coverage among the fits the relative-model-error warning names, and among the rest.
+
+    Per design and model, over the sets every listed model fitted: how many
+    fits carry the warning (:data:`WARNING`), and how many of each group's 90%
+    intervals of μ0 and the fold hold the truth.
+    """
+    print("\n| design | model | warned: sets, μ0 inside, fold inside | not warned: sets, "
+          "μ0 inside, fold inside |\n|---|---|---|---|")
+    for design in DESIGNS:
+        by = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
+        common = sorted({s for s, _ in by if all((s, m) in by for m in models)})
+        for model in models:
+            cells = []
+            for warned in (True, False):
+                sub = [by[(s, model)] for s in common
+                       if any(WARNING in w for w in by[(s, model)]["warnings"]) == warned]
+                cells.append(f"{len(sub)}, {sum(r['mu0']['inside'] for r in sub)}, "
+                             f"{sum(r['mu_fold']['inside'] for r in sub)}")
+            if common:
+                print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
 
 
 def flagged_misses(rows, models) -> None:
