@@ -1,12 +1,13 @@
 """Coverage and interval score of μ0 and the fold on simulated rigs with structural error.
 
-Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs paired,short,sweep]
-[--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for chosen seeds); ``--summary
-[FIRST LAST] [--seeds …] [--models …]`` prints the table of what finished, over the
-sets that every listed model fitted, with each coverage's 90% Clopper–Pearson interval
-(and, with ``kernel_w``, the misses among the sets its fit's window check flags), and
-each model's coverage among the fits that warn of a relative model error above the
-limit and among the rest.
+Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs
+paired,short,sweep] [--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for
+chosen seeds); ``--summary [FIRST LAST] [--seeds …] [--models …] [--warned-by MODEL]``
+prints the table of what finished, over the sets that every listed model fitted, with
+each coverage's 90% Clopper–Pearson interval (and, with ``kernel_w``, the misses among
+the sets its fit's window check flags), and each model's coverage, width and score among
+the fits that warn of a relative model error above the limit and among the rest
+(``--warned-by MODEL``: every model's sets grouped by that model's warning).
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
@@ -165,7 +166,7 @@ def clopper_pearson(k: int, n: int, level: float = 0.9) -> tuple[float, float]:
             float(beta.ppf(1 - a, k + 1, n - k)) if k < n else 1.0)
 
 
-def summary(seeds=None, models=None) -> None:
+def summary(seeds=None, models=None, warned_by=None) -> None:
     """The table of what finished: per design, the sets every listed model fitted."""
     rows = [json.loads(x) for x in OUT.read_text().splitlines()] if OUT.exists() else []
     rows = [r for r in rows if "mu0" in r and (seeds is None or r["seed"] in seeds)]
@@ -190,7 +191,7 @@ def summary(seeds=None, models=None) -> None:
                           f"{score:.3f}"]
             print(f"| {design} | {model} | {len(sub)} | " + " | ".join(cells) + " |")
     flagged_misses(rows, models)
-    warned_split(rows, models)
+    warned_split(rows, models, warned_by)
 
 
 #: The fit check's warning that the model misses the orbits (relative model error above
@@ -198,27 +199,38 @@ def summary(seeds=None, models=None) -> None:
 WARNING = "relative model error"
 
 
-def warned_split(rows, models) -> None:
+def warned_split(rows, models, by: str | None = None) -> None:
     """Coverage among the fits the relative-model-error warning names, and among the rest.
 
     Per design and model, over the sets every listed model fitted: how many
-    fits carry the warning (:data:`WARNING`), and how many of each group's 90%
-    intervals of μ0 and the fold hold the truth.
+    fits carry the warning (:data:`WARNING`), and, in each group, how many of
+    the 90% intervals of μ0 and the fold hold the truth, their mean width and
+    mean interval score. ``by``: group every model's sets by that model's
+    warning (the same sets for all), instead of each model's own.
     """
-    print("\n| design | model | warned: sets, μ0 inside, fold inside | not warned: sets, "
-          "μ0 inside, fold inside |\n|---|---|---|---|")
+    print(f"\nGrouped by {'the warning of ' + by if by else 'each fit' + chr(39) + 's own warning'}"
+          " (sets; μ0 inside, mean width, mean score; the fold's the same):\n\n"
+          "| design | model | warned | not warned |\n|---|---|---|---|")
+
+    def cell(sub):
+        if not sub:
+            return "0"
+        parts = [f"{sum(r[k]['inside'] for r in sub)}, "
+                 f"{np.mean([r[k]['hi'] - r[k]['lo'] for r in sub]):.3f}, "
+                 f"{np.mean([r[k]['score'] for r in sub]):.3f}" for k in ("mu0", "mu_fold")]
+        return f"{len(sub)}; μ0 {parts[0]}; fold {parts[1]}"
+
     for design in DESIGNS:
-        by = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
-        common = sorted({s for s, _ in by if all((s, m) in by for m in models)})
+        at = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
+        common = sorted({s for s, _ in at if all((s, m) in at for m in models)})
         for model in models:
-            cells = []
-            for warned in (True, False):
-                sub = [by[(s, model)] for s in common
-                       if any(WARNING in w for w in by[(s, model)]["warnings"]) == warned]
-                cells.append(f"{len(sub)}, {sum(r['mu0']['inside'] for r in sub)}, "
-                             f"{sum(r['mu_fold']['inside'] for r in sub)}")
-            if common:
-                print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
+            if not common:
+                continue
+            judge = by or model
+            cells = [cell([at[(s, model)] for s in common
+                           if any(WARNING in w for w in at[(s, judge)]["warnings"]) == warned])
+                     for warned in (True, False)]
+            print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
 
 
 def flagged_misses(rows, models) -> None:
@@ -265,8 +277,11 @@ def main(argv):
     unknown = [m for m in models or () if m not in MODELS]
     if unknown:
         sys.exit(f"--models: expected some of {', '.join(MODELS)}; got {', '.join(unknown)}")
+    by = argv[argv.index("--warned-by") + 1] if "--warned-by" in argv else None
+    if by is not None and by not in (models or ()):
+        sys.exit(f"--warned-by: one of the --models expected; got {by}")
     if "--summary" in argv:
-        summary(None if seeds is None else set(seeds), models)
+        summary(None if seeds is None else set(seeds), models, by)
         return
     run(seeds, designs, models or ["plain", "discrepancy"])
 

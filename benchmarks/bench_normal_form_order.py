@@ -1,6 +1,6 @@
 """How far is a simulated rig's amplitude curve from the quintic normal form's?
 
-    python benchmarks/bench_normal_form_order.py --seeds 1513,1546,…
+    python benchmarks/bench_normal_form_order.py --seeds 1513,1546,… [--pairs-only]
 
 For each seed's system (``bench_loo_reference_class.draw_system(seed, effects=True)``,
 the systems of ``bench_discrepancy_coverage.py``) the paired design's orbits are
@@ -15,9 +15,17 @@ over both frame axes, is fitted by least squares with
   ``μ = μ0 + log(1 + b(p A² + q A⁴))/b``, fitted by SciPy's ``least_squares``.
 
 It reports each fit's rms misfit in μ and its μ0 and fold (the smallest μ of the
-fitted curve) minus the truth's. What the order-2 fit misses, the model's map
-(its μ-dependent gain, its network) must absorb, and its prior then decides how
-μ0 and the fold are extrapolated. Writes ``benchmarks/results/normal_form_order.jsonl``.
+fitted curve) minus the truth's. And where the design's **pairs** put the fold: at
+each unstable recording's μ the ratio ``ρ = A_u/A_s`` of the two branches'
+peak-to-peak (the continuation's, no noise) fixes ``−β(μ)/a2² = ρ²/(1 + ρ²)²``
+for any map that only scales the radius (the branches' ``r²`` are the roots of
+``r⁴ − a2 r² − β = 0``); the curved unfolding through the three pairs (μ0, the
+fold and ``b``, by ``least_squares``) extrapolates to the fold, where ``ρ = 1``.
+
+What the order-2 fit misses, the model's map (its μ-dependent gain, its network)
+must absorb, and its prior then decides how μ0 and the fold are extrapolated.
+``--pairs-only`` skips the recordings and the fits of ``A²`` (the pairs need only
+the continuation). Writes ``benchmarks/results/normal_form_order.jsonl``.
 """
 
 from __future__ import annotations
@@ -32,7 +40,7 @@ exit_on_help(__doc__)
 import numpy as np  # noqa: E402
 
 
-def one(seed: int) -> dict:
+def one(seed: int, pairs_only: bool = False) -> dict:
     from bench_discrepancy_coverage import DESIGNS
     from bench_loo_reference_class import draw_system
 
@@ -44,6 +52,10 @@ def one(seed: int) -> dict:
         return {"seed": seed, "skipped": str(why)}
     fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
     d = DESIGNS["paired"]
+    at = np.array([fold + x * (hopf - fold) for x in d["unstable"]])
+    if pairs_only:      # the continuation's branches only, no recordings
+        return {"seed": seed, "effect": values.get("effect"), "hopf": hopf, "fold": fold,
+                "pairs": pairs(diagram, system.observed[0], at)}
     plan = [(fold + x * (hopf - fold), "stable") for x in d["stable"]] + \
            [(fold + x * (hopf - fold), "unstable") for x in d["unstable"]]
     rs = simulate_recordings(system, [m for m, _ in plan], [b for _, b in plan], noise=0.0,
@@ -77,7 +89,31 @@ def one(seed: int) -> dict:
     out["curved"] = {"mu0_error": float(fit.x[0] - hopf),
                      "fold_error": float(np.nanmin(curve) - fold),
                      "rms": float(np.sqrt(np.mean(fit.fun**2))), "b_dmu": float(fit.x[1])}
+    out["pairs"] = pairs(diagram, system.observed[0], at)
     return out
+
+
+def pairs(diagram, name: str, mu: np.ndarray) -> dict:
+    """The curved unfolding through the branches' amplitude ratios at ``mu`` (docstring)."""
+    from scipy.optimize import least_squares
+
+    def amplitude(kind):
+        b = diagram.branch(kind)
+        m, a = np.asarray(b.mu), np.asarray(b.amplitude[name])
+        order = np.argsort(m)
+        return np.interp(mu, m[order], a[order])
+
+    rho = amplitude("unstable") / amplitude("stable")
+    target = rho**2 / (1 + rho**2) ** 2            # −β(μ)/a2², 1/4 at the fold
+
+    def ratio(x):
+        mu0, fold, b = x
+        return np.expm1(b * (mu - mu0)) / (4 * np.expm1(b * (fold - mu0)))
+
+    fold, hopf = diagram.folds[0].mu, diagram.hopf.mu
+    fit = least_squares(lambda x: ratio(x) - target, [hopf, fold, 1e-3])
+    return {"fold_error": float(fit.x[1] - fold), "mu0_error": float(fit.x[0] - hopf),
+            "b": float(fit.x[2]), "residual": float(np.max(np.abs(fit.fun)))}
 
 
 def main(argv) -> None:
@@ -90,7 +126,7 @@ def main(argv) -> None:
     path = RESULTS_DIR / "normal_form_order.jsonl"
     path.parent.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
-        row = one(seed)
+        row = one(seed, pairs_only="--pairs-only" in argv)
         with path.open("a") as fh:
             fh.write(json.dumps(row) + "\n")
         print(json.dumps(row), flush=True)
