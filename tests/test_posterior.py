@@ -328,6 +328,7 @@ def test_a_large_relative_model_error_widens_new_bands_away_from_the_data_and_sa
     (w,) = [w for w in d["warnings"] if "relative model error" in w]
     assert "wider model-error scale 0.7" in w and "in the 70% of the draws" in w
     assert "by leave-one-out" in w and d["fit"]["extrapolation_scale"]["p_above_limit"] > 0.6
+    assert "Hopf and fold intervals do not carry this misfit" in w
     f = post.features
     i = int(np.argmax(np.where(f.unstable, -np.inf, f.mu)))   # the stable recording of largest μ
     beyond, q = [f.mu[i] + 0.5 * post.spec.mu_span], [0.05, 0.5, 0.95]
@@ -389,6 +390,7 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
     bad = replace(post, run=replace(post.run, chains=chains))
     (w,) = [w for w in diagnose(bad)["warnings"] if "relative model error" in w]
     assert "model discrepancy carries it" in w and "by leave-one-out" in w
+    assert "Hopf and fold intervals do not carry this misfit" in w
 
 @pytest.fixture(scope="module")
 def planted_infinite_width():

@@ -30,6 +30,10 @@ SIGMA_ORBIT_FRACTION = 0.01
 #: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
 #: harmonic).
 SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
+#: What that warning adds about μ0 and the fold: their intervals carry the normal
+#: form's extrapolation, not the misfit (``docs/limits.md`` has the simulated rigs).
+HOPF_FOLD_CAVEAT = ("the Hopf and fold intervals do not carry this misfit, and on simulated "
+                    "rigs whose fits warned so they mostly missed the truth (docs/limits.md)")
 #: With the window at the fold (``unfolding="window"``): a posterior median of
 #: its depth ``|A|`` above this many prior SDs is reported as the recordings
 #: near the fold disagreeing with the normal form by more than its prior allows.
@@ -194,8 +198,8 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
         warnings.append(
             f"fit: relative model error {100 * rel:.1f}% (limit {100 * SIGMA_REL_MAX:.0f}%): "
             "the model misses the orbits by that fraction; the model discrepancy carries it "
-            "into the Hopf and fold intervals and the bands, which may still be too narrow "
-            "(check them by leave-one-out: bayeshopf.validation.leave_one_out)")
+            "into the bands, which may still be too narrow (check them by leave-one-out: "
+            f"bayeshopf.validation.leave_one_out); {HOPF_FOLD_CAVEAT}")
     elif rel > SIGMA_REL_MAX:
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
                         f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
@@ -207,6 +211,7 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
                            if post.settings.extrapolation_scale is None else
                            "bands of new measurements away from the recordings are not "
                            "calibrated for such a fit")
-                        + " (check them by leave-one-out: bayeshopf.validation.leave_one_out)")
+                        + " (check them by leave-one-out: bayeshopf.validation.leave_one_out); "
+                        + HOPF_FOLD_CAVEAT)
     d["warnings"] = warnings
     return d
