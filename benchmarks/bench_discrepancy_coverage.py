@@ -208,8 +208,9 @@ def warned_split(rows, models, by: str | None = None) -> None:
     mean interval score. ``by``: group every model's sets by that model's
     warning (the same sets for all), instead of each model's own.
     """
-    print(f"\nGrouped by {'the warning of ' + by if by else 'each fit' + chr(39) + 's own warning'}"
-          " (sets; μ0 inside, mean width, mean score; the fold's the same):\n\n"
+    grouped = f"the warning of {by}" if by else "each fit's own warning"
+    print(f"\nGrouped by {grouped} (sets; μ0 inside, mean width, mean score; the fold's "
+          "the same):\n\n"
           "| design | model | warned | not warned |\n|---|---|---|---|")
 
     def cell(sub):

@@ -94,7 +94,7 @@ def one(seed: int, pairs_only: bool = False) -> dict:
 
 
 def pairs(diagram, name: str, mu: np.ndarray) -> dict:
-    """The curved unfolding through the branches' amplitude ratios at ``mu`` (docstring)."""
+    """The curved unfolding through the branches' amplitude ratios at ``mu`` (module docstring)."""
     from scipy.optimize import least_squares
 
     def amplitude(kind):
