@@ -166,6 +166,12 @@ def clopper_pearson(k: int, n: int, level: float = 0.9) -> tuple[float, float]:
             float(beta.ppf(1 - a, k + 1, n - k)) if k < n else 1.0)
 
 
+def _fitted_by_all(rows, design: str, models) -> tuple[dict, list]:
+    """``design``'s rows by ``(seed, model)``, and the seeds every one of ``models`` fitted."""
+    at = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
+    return at, sorted({s for s, _ in at if all((s, m) in at for m in models)})
+
+
 def summary(seeds=None, models=None, warned_by=None) -> None:
     """The table of what finished: per design, the sets every listed model fitted."""
     rows = [json.loads(x) for x in OUT.read_text().splitlines()] if OUT.exists() else []
@@ -175,8 +181,7 @@ def summary(seeds=None, models=None, warned_by=None) -> None:
           "fold inside (90% CP) | fold width | fold score |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for design in DESIGNS:
-        by = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
-        common = sorted({s for s, _ in by if all((s, m) in by for m in models)})
+        by, common = _fitted_by_all(rows, design, models)
         for model in models:
             sub = [by[(s, model)] for s in common]
             if not sub:
@@ -222,8 +227,7 @@ def warned_split(rows, models, by: str | None = None) -> None:
         return f"{len(sub)}; μ0 {parts[0]}; fold {parts[1]}"
 
     for design in DESIGNS:
-        at = {(r["seed"], r["model"]): r for r in rows if r["design"] == design}
-        common = sorted({s for s, _ in at if all((s, m) in at for m in models)})
+        at, common = _fitted_by_all(rows, design, models)
         for model in models:
             if not common:
                 continue
