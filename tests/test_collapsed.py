@@ -18,22 +18,23 @@ def _spec(unfolding="curved"):
                             15.0, 16.5, 1.0, cm.hidden_layer(6), unfolding=unfolding)
 
 
-def test_log_marginal_equals_the_gaussian_it_collapses():
+@pytest.mark.parametrize("n, J", [(30, 8), (12, 20)])    # through A (J ≤ n) and through Σ̃
+def test_log_marginal_equals_the_gaussian_it_collapses(n, J):
     rng = np.random.default_rng(0)
-    Phi = rng.standard_normal((30, 8))
-    sd = np.exp(rng.standard_normal(8))
-    d = np.exp(rng.standard_normal(30)) * 0.1
-    y = rng.standard_normal(30)
-    direct = multivariate_normal(np.zeros(30), Phi @ np.diag(sd**2) @ Phi.T + np.diag(d)).logpdf(y)
+    Phi = rng.standard_normal((n, J))
+    sd = np.exp(rng.standard_normal(J))
+    d = np.exp(rng.standard_normal(n)) * 0.1
+    y = rng.standard_normal(n)
+    direct = multivariate_normal(np.zeros(n), Phi @ np.diag(sd**2) @ Phi.T + np.diag(d)).logpdf(y)
     np.testing.assert_allclose(cm.log_marginal(Phi, y, d, sd), direct, rtol=1e-10)
 
 
-def test_log_marginal_derivatives_equal_those_of_the_dense_gaussian():
-    # the hand-written JVP against reverse mode through the dense n x n Cholesky
+@pytest.mark.parametrize("n, J", [(24, 7), (10, 18)])    # through A (J ≤ n) and through Σ̃
+def test_log_marginal_derivatives_equal_those_of_the_dense_gaussian(n, J):
+    # the hand-written JVPs against reverse mode through the dense n x n Cholesky
     # (jax.scipy's multivariate normal), first and second derivatives, on one
     # smooth path through all four arguments
     rng = np.random.default_rng(2)
-    n, J = 24, 7
     Phi0, dPhi = rng.standard_normal((n, J)), rng.standard_normal((n, J))
     y0, dy = rng.standard_normal(n), rng.standard_normal(n)
     d0, dd = np.exp(rng.standard_normal(n)) * 0.2, rng.standard_normal(n)
@@ -121,17 +122,19 @@ def test_control_columns_are_the_complex_gain_times_the_control():
     assert sd.shape == (spec.n_basis,) and np.all(sd[-2:] == 5.0)
 
 
-def test_log_marginal_derivatives_hold_when_the_measurement_errors_are_small():
-    # the model's own design (8 recordings on both branches) with errors of 1e-4 of the
-    # signal: A = I + Φ'ᵀD⁻¹Φ' is ill-conditioned (about 1e9) and yᵀD⁻¹y − bᵀA⁻¹b a
-    # difference of large numbers, as on the demo. The value returned with the gradient
-    # must be the primal's (an explicit A⁻¹ was off by about 1 here), the gradient that of
-    # reverse mode through the Cholesky factorisation of A (JAX's own rules; the dense
-    # n × n Gaussian is itself too ill-conditioned to serve)
+@pytest.mark.parametrize("n_pairs", [4, 1])    # 56 data, 36 columns (A); 14 data (Σ̃)
+def test_log_marginal_derivatives_hold_when_the_measurement_errors_are_small(n_pairs):
+    # the model's own design (8 recordings on both branches, or 2: more columns than
+    # data, so through Σ̃) with errors of 1e-4 of the signal: A = I + Φ'ᵀD⁻¹Φ' is
+    # ill-conditioned (about 1e9) and yᵀD⁻¹y − bᵀA⁻¹b a difference of large numbers, as on
+    # the demo. The value returned with the gradient must be the primal's (an explicit A⁻¹
+    # was off by about 1 here), the gradient that of reverse mode through the Cholesky
+    # factorisation of A (JAX's own rules; the dense n × n Gaussian is itself too
+    # ill-conditioned to serve)
     spec = _spec()
     theta = {"mu0": 17.0, "mu_fold": 14.5, "a2": 2.0 * np.sqrt(2.5), "w_unfold": 0.0}
-    mu = jnp.array([15.0, 15.5, 16.0, 16.5] * 2)
-    sign = jnp.array([1.0] * 4 + [-1.0] * 4)
+    mu = jnp.array([15.0, 15.5, 16.0, 16.5][:n_pairs] * 2)
+    sign = jnp.array([1.0] * n_pairs + [-1.0] * n_pairs)
     Phi0 = np.asarray(cm.design(spec, mu, sign, theta)).reshape(-1, spec.n_basis)
     rng = np.random.default_rng(5)
     sd0 = np.asarray(cm.prior_sd(spec, 0.1, 0.1))

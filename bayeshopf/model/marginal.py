@@ -13,8 +13,13 @@ and ``β | y ~ N(V^{1/2} A^{-1} b, V^{1/2} A^{-1} V^{1/2})`` (Woodbury). One
 Cholesky factor of the J × J matrix ``A`` gives the value
 (:func:`log_marginal`), its derivatives, a draw of ``β``
 (:func:`conditional_draw`) and each block's leave-one-out density
-(:func:`block_log_predictive`). :mod:`bayeshopf.model.collapsed` uses it for the
-map and :mod:`bayeshopf.model.frequency` for the phase speed.
+(:func:`block_log_predictive`). Where there are more columns than data
+(``J > n``: the network at infinite width, with the discrepancy's latents) the
+value and its derivatives come instead from the n × n matrix
+``Σ̃ = D^{-1/2} Σ D^{-1/2} = I + P Pᵀ``, ``P = D^{-1/2} Φ'``, whose eigenvalues
+other than 1 are those of ``A``: the same conditioning at a smaller size.
+:mod:`bayeshopf.model.collapsed` uses it for the map and
+:mod:`bayeshopf.model.frequency` for the phase speed.
 """
 
 from __future__ import annotations
@@ -40,8 +45,20 @@ def _factored(Phi, y, d, sd):
     return value, L, z, PD, Dinv
 
 
-@jax.custom_jvp
 def log_marginal(Phi, y, d, sd):
+    r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)``.
+
+    Through the J × J matrix ``A`` (:func:`_woodbury`) where ``J ≤ n``, through
+    the n × n matrix ``Σ̃`` (:func:`_dual`) where ``J > n``: the same value and
+    derivatives (``tests/test_collapsed.py``), with the smaller factorisation.
+    """
+    if Phi.shape[-1] > Phi.shape[-2]:
+        return _dual(Phi, y, d, sd)
+    return _woodbury(Phi, y, d, sd)
+
+
+@jax.custom_jvp
+def _woodbury(Phi, y, d, sd):
     r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)`` (Woodbury).
 
     Its derivatives are written out (:func:`_log_marginal_jvp`) rather than
@@ -68,11 +85,10 @@ def log_marginal(Phi, y, d, sd):
     return _factored(Phi, y, d, sd)[0]
 
 
-@log_marginal.defjvp
+@_woodbury.defjvp
 def _log_marginal_jvp(primals, tangents):
-    """Value and directional derivative of :func:`log_marginal` (its docstring's formulas)."""
+    """Value and directional derivative of :func:`_woodbury` (its docstring's formulas)."""
     Phi, y, d, sd = primals
-    dPhi, dy, dd, dsd = tangents
     solve = jax.scipy.linalg.solve_triangular
     # triangular solves throughout, never A⁻¹ itself: with small measured errors A is
     # ill-conditioned, and an explicit inverse puts visible error into the log density
@@ -81,11 +97,61 @@ def _log_marginal_jvp(primals, tangents):
     alpha = Dinv * y - PD @ m
     C = solve(L, PD.T, lower=True)                  # L⁻¹Φ'ᵀD⁻¹, (J, n)
     B = solve(L.T, C, lower=False).T                # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
+    return value, _tangent(Phi, sd, alpha, m, B, Dinv - jnp.sum(C * C, axis=0), tangents)
+
+
+def _tangent(Phi, sd, alpha, m, B, sigma_inv_diag, tangents):
+    """The directional derivative from ``α = Σ⁻¹y``, ``m = Φ'ᵀα``, ``B = Σ⁻¹Φ'``, ``diag Σ⁻¹``.
+
+    :func:`_woodbury`'s formulas; ``1 − (A⁻¹)_jj = Σ_i Φ'_ij B_ij``, as
+    ``A − I = Φ'ᵀD⁻¹Φ'``.
+    """
+    dPhi, dy, dd, dsd = tangents
     g_Phi = (alpha[:, None] * m[None, :] - B) * sd
-    g_d = 0.5 * (alpha**2 - Dinv + jnp.sum(C * C, axis=0))
-    # 1 − (A⁻¹)_jj = (Φ'ᵀD⁻¹Φ'A⁻¹)_jj = Σ_i Φ'_ij B_ij, as A − I = Φ'ᵀD⁻¹Φ'
+    g_d = 0.5 * (alpha**2 - sigma_inv_diag)
     g_sd = (m**2 - jnp.sum((Phi * sd) * B, axis=0)) / sd
-    return value, jnp.sum(g_Phi * dPhi) - alpha @ dy + g_d @ dd + g_sd @ dsd
+    return jnp.sum(g_Phi * dPhi) - alpha @ dy + g_d @ dd + g_sd @ dsd
+
+
+def _factored_dual(Phi, y, d, sd):
+    """The collapsed Gaussian's log density through ``Σ̃ = I + P Pᵀ``, ``P = D^{-1/2}Φ'``.
+
+    Returns:
+        ``(log N(y | 0, Σ), L, u, P, r)`` with ``Σ̃ = L Lᵀ``, ``u = L⁻¹ D^{-1/2} y``
+        and ``r = d^{-1/2}``.
+    """
+    r = jax.lax.rsqrt(d)
+    P = (Phi * sd) * r[:, None]
+    L = jnp.linalg.cholesky(jnp.eye(Phi.shape[0]) + P @ P.T)
+    u = jax.scipy.linalg.solve_triangular(L, r * y, lower=True)
+    value = -0.5 * (u @ u + jnp.sum(jnp.log(d)) + 2.0 * jnp.sum(jnp.log(jnp.diag(L)))
+                    + y.size * jnp.log(2 * jnp.pi))
+    return value, L, u, P, r
+
+
+@jax.custom_jvp
+def _dual(Phi, y, d, sd):
+    r"""``log N(y | 0, Σ)`` through the n × n matrix ``Σ̃ = D^{-1/2} Σ D^{-1/2}`` (``J > n``).
+
+    ``log|Σ| = log|D| + log|Σ̃|`` and ``yᵀΣ⁻¹y = |L⁻¹D^{-1/2}y|²``; the
+    derivatives are :func:`_woodbury`'s formulas, with ``α = Σ⁻¹y``,
+    ``Σ⁻¹Φ' = D^{-1/2} Σ̃⁻¹ P`` and ``(Σ⁻¹)_{ii} = |(L⁻¹)_{:,i}|² / d_i`` from
+    triangular solves with ``L`` (:func:`_dual_jvp`).
+    """
+    return _factored_dual(Phi, y, d, sd)[0]
+
+
+@_dual.defjvp
+def _dual_jvp(primals, tangents):
+    """Value and directional derivative of :func:`_dual`."""
+    Phi, y, d, sd = primals
+    solve = jax.scipy.linalg.solve_triangular
+    value, L, u, P, r = _factored_dual(Phi, y, d, sd)
+    alpha = r * solve(L.T, u, lower=False)                                # Σ⁻¹y
+    B = r[:, None] * solve(L.T, solve(L, P, lower=True), lower=False)    # Σ⁻¹Φ', (n, J)
+    Li = solve(L, jnp.eye(L.shape[0]), lower=True)                        # L⁻¹
+    m = (Phi * sd).T @ alpha                                              # Φ'ᵀΣ⁻¹y = A⁻¹b
+    return value, _tangent(Phi, sd, alpha, m, B, r * r * jnp.sum(Li * Li, axis=0), tangents)
 
 
 def conditional_draw(Phi, y, d, sd, eps):
