@@ -19,7 +19,9 @@ discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
 ``nn_width=None``; ``kernel_scale``: ``kernel`` with the network's input scale
 on μ learned; ``kernel_nu3``: that scale fixed at 3; ``kernel_h``: ``kernel`` with
 the horizontal discrepancy, ``unfolding="horizontal"``; ``kernel_w``: ``kernel`` with
-the window at the fold, ``unfolding="window"``; every other setting the default):
+the window at the fold, ``unfolding="window"``; ``kernel_f``: ``kernel`` with the
+discrepancy's floor ``κ = 1`` near the Hopf point, ``discrepancy_floor=1``; every other
+setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -71,7 +73,8 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "kernel_scale": dict(discrepancy=True, nn_width=None, nn_mu_scale=None),
           "kernel_nu3": dict(discrepancy=True, nn_width=None, nn_mu_scale=3.0),
           "kernel_h": dict(discrepancy=True, nn_width=None, unfolding="horizontal"),
-          "kernel_w": dict(discrepancy=True, nn_width=None, unfolding="window")}
+          "kernel_w": dict(discrepancy=True, nn_width=None, unfolding="window"),
+          "kernel_f": dict(discrepancy=True, nn_width=None, discrepancy_floor=1.0)}
 NOISE = 0.015
 ALPHA = 0.1
 
