@@ -40,77 +40,7 @@ def _factored(Phi, y, d, sd):
     PD = Dinv[:, None] * Ps                         # D⁻¹Φ'
     L = jnp.linalg.cholesky(jnp.eye(Phi.shape[-1]) + Ps.T @ PD)
     z = jax.scipy.linalg.solve_triangular(L, PD.T @ y, lower=True)
-    value = -0.5 * (jnp.sum(Dinv * y * y) - z @ z + jnp.sum(jnp.log(d))
-                    + 2.0 * jnp.sum(jnp.log(jnp.diag(L))) + y.size * jnp.log(2 * jnp.pi))
-    return value, L, z, PD, Dinv
-
-
-def log_marginal(Phi, y, d, sd):
-    r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)``.
-
-    Through the J × J matrix ``A`` (:func:`_woodbury`) where ``J ≤ n``, through
-    the n × n matrix ``Σ̃`` (:func:`_dual`) where ``J > n``: the same value and
-    derivatives (``tests/test_collapsed.py``), with the smaller factorisation.
-    """
-    if Phi.shape[-1] > Phi.shape[-2]:
-        return _dual(Phi, y, d, sd)
-    return _woodbury(Phi, y, d, sd)
-
-
-@jax.custom_jvp
-def _woodbury(Phi, y, d, sd):
-    r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)`` (Woodbury).
-
-    Its derivatives are written out (:func:`_log_marginal_jvp`) rather than
-    traced through the Cholesky factorisation: with ``Φ' = Φ V^{1/2}``,
-    ``A = I + Φ'ᵀD⁻¹Φ'``, ``m = A⁻¹Φ'ᵀD⁻¹y`` and ``α = Σ⁻¹y = D⁻¹(y − Φ'm)``,
-
-    .. math::
-
-        \frac{∂ℓ}{∂Φ} = (α m^T − D^{-1}Φ'A^{-1})\,V^{1/2},\qquad
-        \frac{∂ℓ}{∂d_i} = \tfrac12\big(α_i^2 − (Σ^{-1})_{ii}\big),
-
-        \frac{∂ℓ}{∂\,sd_j} = \frac{m_j^2 − 1 + (A^{-1})_{jj}}{sd_j},\qquad
-        \frac{∂ℓ}{∂y} = −α,
-
-    from ``∂ℓ/∂Σ = ½(ααᵀ − Σ⁻¹)`` with ``Σ⁻¹Φ' = D⁻¹Φ'A⁻¹`` and ``Φ'ᵀα = m``. One
-    Cholesky factor of the J × J matrix ``A`` and triangular solves with it give
-    them all (never ``A⁻¹`` itself, which small measurement errors make
-    ill-conditioned), and NUTS runs faster with them than with reverse mode
-    through the factorisation. Second derivatives (the Laplace covariance) still work, as the
-    rule is made of differentiable operations. ``tests/test_collapsed.py``
-    checks value, gradient and Hessian against the dense Gaussian, and value
-    and gradient against reverse mode on an ill-conditioned design.
-    """
-    return _factored(Phi, y, d, sd)[0]
-
-
-@_woodbury.defjvp
-def _log_marginal_jvp(primals, tangents):
-    """Value and directional derivative of :func:`_woodbury` (its docstring's formulas)."""
-    Phi, y, d, sd = primals
-    solve = jax.scipy.linalg.solve_triangular
-    # triangular solves throughout, never A⁻¹ itself: with small measured errors A is
-    # ill-conditioned, and an explicit inverse puts visible error into the log density
-    value, L, z, PD, Dinv = _factored(Phi, y, d, sd)
-    m = solve(L.T, z, lower=False)                  # A⁻¹b
-    alpha = Dinv * y - PD @ m
-    C = solve(L, PD.T, lower=True)                  # L⁻¹Φ'ᵀD⁻¹, (J, n)
-    B = solve(L.T, C, lower=False).T                # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
-    return value, _tangent(Phi, sd, alpha, m, B, Dinv - jnp.sum(C * C, axis=0), tangents)
-
-
-def _tangent(Phi, sd, alpha, m, B, sigma_inv_diag, tangents):
-    """The directional derivative from ``α = Σ⁻¹y``, ``m = Φ'ᵀα``, ``B = Σ⁻¹Φ'``, ``diag Σ⁻¹``.
-
-    :func:`_woodbury`'s formulas; ``1 − (A⁻¹)_jj = Σ_i Φ'_ij B_ij``, as
-    ``A − I = Φ'ᵀD⁻¹Φ'``.
-    """
-    dPhi, dy, dd, dsd = tangents
-    g_Phi = (alpha[:, None] * m[None, :] - B) * sd
-    g_d = 0.5 * (alpha**2 - sigma_inv_diag)
-    g_sd = (m**2 - jnp.sum((Phi * sd) * B, axis=0)) / sd
-    return jnp.sum(g_Phi * dPhi) - alpha @ dy + g_d @ dd + g_sd @ dsd
+    return _gaussian(jnp.sum(Dinv * y * y) - z @ z, L, d), L, z, PD, Dinv
 
 
 def _factored_dual(Phi, y, d, sd):
@@ -124,34 +54,86 @@ def _factored_dual(Phi, y, d, sd):
     P = (Phi * sd) * r[:, None]
     L = jnp.linalg.cholesky(jnp.eye(Phi.shape[0]) + P @ P.T)
     u = jax.scipy.linalg.solve_triangular(L, r * y, lower=True)
-    value = -0.5 * (u @ u + jnp.sum(jnp.log(d)) + 2.0 * jnp.sum(jnp.log(jnp.diag(L)))
-                    + y.size * jnp.log(2 * jnp.pi))
-    return value, L, u, P, r
+    return _gaussian(u @ u, L, d), L, u, P, r
+
+
+def _gaussian(quadratic, L, d):
+    """``−½[yᵀΣ⁻¹y + log|D| + log|LLᵀ| + n log 2π]``, ``|Σ| = |D| |LLᵀ|`` in both forms."""
+    return -0.5 * (quadratic + jnp.sum(jnp.log(d)) + 2.0 * jnp.sum(jnp.log(jnp.diag(L)))
+                   + d.size * jnp.log(2 * jnp.pi))
+
+
+def _wide(Phi) -> bool:
+    """More columns than data: factor the n × n ``Σ̃`` rather than the J × J ``A``."""
+    return Phi.shape[-1] > Phi.shape[-2]
 
 
 @jax.custom_jvp
-def _dual(Phi, y, d, sd):
-    r"""``log N(y | 0, Σ)`` through the n × n matrix ``Σ̃ = D^{-1/2} Σ D^{-1/2}`` (``J > n``).
+def log_marginal(Phi, y, d, sd):
+    r"""``log N(y | 0, Σ)``, ``Σ = Φ V Φᵀ + D``, ``V = diag(sd²)``, ``D = diag(d)``.
 
-    ``log|Σ| = log|D| + log|Σ̃|`` and ``yᵀΣ⁻¹y = |L⁻¹D^{-1/2}y|²``; the
-    derivatives are :func:`_woodbury`'s formulas, with ``α = Σ⁻¹y``,
-    ``Σ⁻¹Φ' = D^{-1/2} Σ̃⁻¹ P`` and ``(Σ⁻¹)_{ii} = |(L⁻¹)_{:,i}|² / d_i`` from
-    triangular solves with ``L`` (:func:`_dual_jvp`).
+    Through the J × J matrix ``A`` (Woodbury, :func:`_factored`) where ``J ≤ n``,
+    through the n × n matrix ``Σ̃`` (:func:`_factored_dual`) where ``J > n``:
+    the same value and derivatives, with the smaller factorisation. The
+    derivatives are written out (:func:`_log_marginal_jvp`) rather than traced
+    through the factorisation: with ``Φ' = Φ V^{1/2}``, ``A = I + Φ'ᵀD⁻¹Φ'``,
+    ``m = A⁻¹Φ'ᵀD⁻¹y = Φ'ᵀα`` and ``α = Σ⁻¹y = D⁻¹(y − Φ'm)``,
+
+    .. math::
+
+        \frac{∂ℓ}{∂Φ} = (α m^T − Σ^{-1}Φ')\,V^{1/2},\qquad
+        \frac{∂ℓ}{∂d_i} = \tfrac12\big(α_i^2 − (Σ^{-1})_{ii}\big),
+
+        \frac{∂ℓ}{∂\,sd_j} = \frac{m_j^2 − 1 + (A^{-1})_{jj}}{sd_j},\qquad
+        \frac{∂ℓ}{∂y} = −α,
+
+    from ``∂ℓ/∂Σ = ½(ααᵀ − Σ⁻¹)``, with ``Σ⁻¹Φ' = D⁻¹Φ'A⁻¹ = D^{-1/2}Σ̃⁻¹P``.
+    One Cholesky factor and triangular solves with it give them all (never
+    ``A⁻¹`` itself, which small measurement errors make ill-conditioned), and
+    NUTS runs faster with them than with reverse mode through the
+    factorisation. Second derivatives (the Laplace covariance) still work, as
+    the rule is made of differentiable operations. ``tests/test_collapsed.py``
+    checks value, gradient and Hessian against the dense Gaussian, and value
+    and gradient against reverse mode on an ill-conditioned design, in both forms.
     """
-    return _factored_dual(Phi, y, d, sd)[0]
+    return (_factored_dual if _wide(Phi) else _factored)(Phi, y, d, sd)[0]
 
 
-@_dual.defjvp
-def _dual_jvp(primals, tangents):
-    """Value and directional derivative of :func:`_dual`."""
-    Phi, y, d, sd = primals
+def _woodbury_moments(Phi, y, d, sd):
+    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``A``."""
+    solve = jax.scipy.linalg.solve_triangular
+    # triangular solves throughout, never A⁻¹ itself: with small measured errors A is
+    # ill-conditioned, and an explicit inverse puts visible error into the log density
+    value, L, z, PD, Dinv = _factored(Phi, y, d, sd)
+    m = solve(L.T, z, lower=False)                  # A⁻¹b
+    alpha = Dinv * y - PD @ m
+    C = solve(L, PD.T, lower=True)                  # L⁻¹Φ'ᵀD⁻¹, (J, n)
+    B = solve(L.T, C, lower=False).T                # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
+    return value, alpha, m, B, Dinv - jnp.sum(C * C, axis=0)
+
+
+def _dual_moments(Phi, y, d, sd):
+    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``Σ̃``: ``(Σ⁻¹)_{ii} = |(L⁻¹)_{:,i}|²/d_i``."""
     solve = jax.scipy.linalg.solve_triangular
     value, L, u, P, r = _factored_dual(Phi, y, d, sd)
     alpha = r * solve(L.T, u, lower=False)                                # Σ⁻¹y
     B = r[:, None] * solve(L.T, solve(L, P, lower=True), lower=False)    # Σ⁻¹Φ', (n, J)
     Li = solve(L, jnp.eye(L.shape[0]), lower=True)                        # L⁻¹
-    m = (Phi * sd).T @ alpha                                              # Φ'ᵀΣ⁻¹y = A⁻¹b
-    return value, _tangent(Phi, sd, alpha, m, B, r * r * jnp.sum(Li * Li, axis=0), tangents)
+    return value, alpha, (Phi * sd).T @ alpha, B, r * r * jnp.sum(Li * Li, axis=0)
+
+
+@log_marginal.defjvp
+def _log_marginal_jvp(primals, tangents):
+    """Value and directional derivative of :func:`log_marginal` (its docstring's formulas)."""
+    Phi, y, d, sd = primals
+    dPhi, dy, dd, dsd = tangents
+    value, alpha, m, B, sigma_inv_diag = (_dual_moments if _wide(Phi)
+                                          else _woodbury_moments)(Phi, y, d, sd)
+    g_Phi = (alpha[:, None] * m[None, :] - B) * sd
+    g_d = 0.5 * (alpha**2 - sigma_inv_diag)
+    # 1 − (A⁻¹)_jj = (Φ'ᵀΣ⁻¹Φ')_jj = Σ_i Φ'_ij B_ij, as A − I = Φ'ᵀD⁻¹Φ'
+    g_sd = (m**2 - jnp.sum((Phi * sd) * B, axis=0)) / sd
+    return value, jnp.sum(g_Phi * dPhi) - alpha @ dy + g_d @ dd + g_sd @ dsd
 
 
 def conditional_draw(Phi, y, d, sd, eps):
