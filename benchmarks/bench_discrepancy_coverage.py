@@ -20,8 +20,11 @@ discrepancy, 16 hidden units; ``discrepancy``: with it; ``kernel`` and
 on μ learned; ``kernel_nu3``: that scale fixed at 3; ``kernel_h``: ``kernel`` with
 the horizontal discrepancy, ``unfolding="horizontal"``; ``kernel_w``: ``kernel`` with
 the window at the fold, ``unfolding="window"``; ``kernel_f``: ``kernel`` with the
-discrepancy's floor ``κ = 1`` near the Hopf point, ``discrepancy_floor=1``; every other
-setting the default):
+discrepancy's floor ``κ = 1`` near the Hopf point, ``discrepancy_floor=1``;
+``kernel_s``: ``kernel``, its row also holding the intervals of μ0 and the fold under
+the discrepancy in μ of :mod:`bayeshopf.model.bifurcation_shift` for each ``κ`` of
+:data:`KAPPAS`, read by ``--summary`` as models ``kernel_s@κ``; every other setting the
+default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -74,7 +77,12 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "kernel_nu3": dict(discrepancy=True, nn_width=None, nn_mu_scale=3.0),
           "kernel_h": dict(discrepancy=True, nn_width=None, unfolding="horizontal"),
           "kernel_w": dict(discrepancy=True, nn_width=None, unfolding="window"),
-          "kernel_f": dict(discrepancy=True, nn_width=None, discrepancy_floor=1.0)}
+          "kernel_f": dict(discrepancy=True, nn_width=None, discrepancy_floor=1.0),
+          "kernel_s": dict(discrepancy=True, nn_width=None)}
+#: The sizes ``κ`` of the discrepancy in μ at the Hopf point and the fold
+#: (:mod:`bayeshopf.model.bifurcation_shift`) whose intervals a ``kernel_s`` row holds;
+#: ``--summary --models kernel_s@2`` reads them as a model of their own.
+KAPPAS = (1.0, 2.0, 4.0, 8.0)
 NOISE = 0.015
 ALPHA = 0.1
 
@@ -112,6 +120,44 @@ def fit_one(rs, model: str) -> dict:
         iv = post.interval(k)
         if iv is not None:
             out[k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}
+    if model == "kernel_s":
+        out["shift"] = shifted_intervals(post)
+    return out
+
+
+def shifted_intervals(post) -> dict:
+    """90% intervals of μ0 and the fold under the discrepancy in μ, per κ of :data:`KAPPAS`."""
+    import jax
+
+    from bayeshopf.diagnostics.summaries import interval
+    from bayeshopf.model.bifurcation_shift import shift_draws
+
+    f = post.features
+    sign = np.where(f.unstable, -1.0, 1.0)
+    out = {}
+    for kappa in KAPPAS:
+        d = shift_draws(post.spec, post.theta, f.mu, sign, kappa, jax.random.PRNGKey(0))
+        out[str(kappa)] = {}
+        for k, v in d.items():
+            iv = interval(v, 1 - ALPHA)
+            out[str(kappa)][k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}
+    return out
+
+
+def expand_shifts(rows) -> list:
+    """Each ``kernel_s`` row also as ``kernel_s@κ`` (``@0``: the model's own intervals)."""
+    out = list(rows)
+    for r in rows:
+        if r.get("model") != "kernel_s" or "shift" not in r:
+            continue
+        out.append({**r, "model": "kernel_s@0"})
+        for kappa, ivs in r["shift"].items():
+            row = {**r, "model": f"kernel_s@{float(kappa):g}"}
+            for k, iv in ivs.items():
+                t = r["truth"][k]
+                row[k] = {**iv, "inside": bool(iv["lo"] <= t <= iv["hi"]),
+                          "score": interval_score(iv["lo"], iv["hi"], t)}
+            out.append(row)
     return out
 
 
@@ -178,7 +224,7 @@ def _fitted_by_all(rows, design: str, models) -> tuple[dict, list]:
 def summary(seeds=None, models=None, warned_by=None) -> None:
     """The table of what finished: per design, the sets every listed model fitted."""
     rows = [json.loads(x) for x in OUT.read_text().splitlines()] if OUT.exists() else []
-    rows = [r for r in rows if "mu0" in r and (seeds is None or r["seed"] in seeds)]
+    rows = expand_shifts([r for r in rows if "mu0" in r and (seeds is None or r["seed"] in seeds)])
     models = models or list(MODELS)
     print("| design | model | sets | μ0 inside (90% CP) | μ0 width | μ0 score | "
           "fold inside (90% CP) | fold width | fold score |")
@@ -282,7 +328,7 @@ def main(argv):
                else list(DEFAULT_DESIGNS))
     models = (argv[argv.index("--models") + 1].split(",") if "--models" in argv
               else None)
-    unknown = [m for m in models or () if m not in MODELS]
+    unknown = [m for m in models or () if m.split("@")[0] not in MODELS]
     if unknown:
         sys.exit(f"--models: expected some of {', '.join(MODELS)}; got {', '.join(unknown)}")
     by = argv[argv.index("--warned-by") + 1] if "--warned-by" in argv else None
