@@ -229,9 +229,9 @@ class DesignResult:
 
 def candidate_grid(fit, n: int = 41) -> np.ndarray:
     """Default candidates: ``n`` μ from the lower end of the fold's band to beyond the data."""
-    s = fit.samples
-    lo = float(np.quantile(s["mu_fold"], 0.05)) if "mu_fold" in s else fit.spec.mu_min
-    hi = max(fit.spec.mu_min + fit.spec.mu_span, float(np.quantile(s["mu0"], 0.95)))
+    lo = (float(np.quantile(fit.bifurcation("mu_fold"), 0.05)) if "mu_fold" in fit.samples
+          else fit.spec.mu_min)
+    hi = max(fit.spec.mu_min + fit.spec.mu_span, float(np.quantile(fit.bifurcation("mu0"), 0.95)))
     return np.linspace(lo, hi, n)
 
 
@@ -416,7 +416,7 @@ def next_measurements(fit, *, target: str = "fold", candidates=None,
         grid = fit.default_mu_grid(60)
         values = np.concatenate([fit.amplitude(grid, b) for b in fit_branches(fit)], axis=1)
     else:
-        values = np.asarray(fit.samples["mu_fold" if target == "fold" else "mu0"])[idx, None]
+        values = fit.bifurcation("mu_fold" if target == "fold" else "mu0")[idx, None]
     widths, keep = _band_widths(values, ci)
     values, widths = values[:, keep], widths[keep]
     width_now = float(np.mean(widths))

@@ -7,7 +7,8 @@ import math
 import numpy as np
 
 from bayeshopf._version import __version__
-from bayeshopf.diagnostics.summaries import CI
+from bayeshopf.diagnostics.summaries import CI, interval
+from bayeshopf.hybrid_posterior import RIG
 
 __all__ = ["COLLAPSED_CORE", "summary_hybrid"]
 
@@ -19,6 +20,15 @@ def _finite_or_none(x: float) -> float | None:
 
 #: ``model.json``'s ``core`` for fits of :func:`bayeshopf.posterior.fit_hybrid`.
 COLLAPSED_CORE = "collapsed"
+
+
+
+def _normal_form_points(post, ci: float) -> dict | None:
+    """The normal form's own Hopf point and fold, where the discrepancy in μ moved the fit's."""
+    if "mu0" + RIG not in post.samples:
+        return None
+    return {k: interval(post.samples[k], ci).to_json() for k in ("mu0", "mu_fold")
+            if k in post.samples}
 
 
 def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) -> dict:
@@ -63,6 +73,7 @@ def summary_hybrid(post, ppc=None, extra: dict | None = None, ci: float = CI) ->
         "core": COLLAPSED_CORE,
         "mu0": iv("mu0"), "a2": iv("a2"), "a4": iv("a4"), "mu_fold": iv("mu_fold"),
         "w_unfold": iv("w_unfold"),
+        "normal_form_points": _normal_form_points(post, ci),
         "criticality": post.criticality, "unfolding": post.spec.unfolding,
         "mu_label": post.mu_label, "mu_units": post.mu_units,
         "amplitude_units": post.amplitude_units,

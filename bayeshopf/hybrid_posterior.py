@@ -50,6 +50,10 @@ from bayeshopf.predictive import (
 
 #: Phases per predicted orbit.
 N_PHI = 64
+#: Suffix of the rig's Hopf point and fold among the draws (``mu0_rig``,
+#: ``mu_fold_rig``): the normal form's moved by the discrepancy in μ
+#: (:func:`~bayeshopf.posterior.with_rig_bifurcations`).
+RIG = "_rig"
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,17 @@ class HybridPosterior:
     @property
     def theta(self) -> dict:
         """Draws of the nonlinear parameters the map and orbits need."""
-        return {k: v for k, v in self.samples.items() if not k.startswith("marginal")}
+        return {k: v for k, v in self.samples.items()
+                if not k.startswith("marginal") and not k.endswith(RIG)}
+
+    def bifurcation(self, name: str) -> np.ndarray:
+        """Draws of the Hopf point (``"mu0"``) or the fold (``"mu_fold"``) of the rig.
+
+        With the discrepancy in μ, the normal form's points moved by it
+        (``mu0_rig``, ``mu_fold_rig``); else the normal form's own.
+        """
+        s = self.samples
+        return np.asarray(s.get(name + RIG, s[name]))
 
     def extrapolation_scales(self, n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
         """The scale ``S`` of the model error away from the recordings, per draw.
@@ -128,9 +142,15 @@ class HybridPosterior:
         return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
-        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None."""
+        """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None.
+
+        ``mu0`` and ``mu_fold`` are the rig's (:meth:`bifurcation`); ``mu0_rig``
+        and ``mu_fold_rig`` name them too where the discrepancy in μ moved them.
+        """
         if name not in self.samples:
             return None
+        if name in ("mu0", "mu_fold"):
+            return interval(self.bifurcation(name), mass)
         return interval(self.samples[name], mass)
 
     # ----------------------------------------------------------------- orbits
@@ -388,11 +408,11 @@ class HybridPosterior:
     # ----------------------------------------------------------------- summaries
     def default_mu_grid(self, n: int = 120) -> np.ndarray:
         """μ from below the fold (or the Hopf point) to beyond the data."""
-        s = self.samples
-        lo = min(self.spec.mu_min, float(np.quantile(s["mu0"], 0.01)))
-        if "mu_fold" in s:
-            lo = min(lo, float(np.quantile(s["mu_fold"], 0.01)))
-        hi = max(self.spec.mu_min + self.spec.mu_span, float(np.quantile(s["mu0"], 0.99)))
+        mu0 = self.bifurcation("mu0")
+        lo = min(self.spec.mu_min, float(np.quantile(mu0, 0.01)))
+        if "mu_fold" in self.samples:
+            lo = min(lo, float(np.quantile(self.bifurcation("mu_fold"), 0.01)))
+        hi = max(self.spec.mu_min + self.spec.mu_span, float(np.quantile(mu0, 0.99)))
         pad = 0.05 * (hi - lo)
         return np.linspace(lo - pad, hi + pad, n)
 
@@ -432,12 +452,11 @@ class HybridPosterior:
                                    self.run.betas[idx], self.samples["mu_fold"][idx][:, None],
                                    normal_form.STABLE, per_draw=True)
             fold_amp = self._amplitude_of(c)[:, 0]
-            fold = interval(self.samples["mu_fold"], ci)
+            fold = interval(self.bifurcation("mu_fold"), ci)
             fold_iv = interval(fold_amp, ci)
         else:
             unstable, fold, fold_iv = None, None, None
-        return DiagramBands(stable, unstable, interval(self.samples["mu0"], ci), fold,
-                                  fold_iv)
+        return DiagramBands(stable, unstable, interval(self.bifurcation("mu0"), ci), fold, fold_iv)
 
     @cached_property
     def training_coefficients(self) -> tuple[np.ndarray, ...]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from bayeshopf.diagnostics.fit_checks import (  # noqa: F401 (re-exported)
 from bayeshopf.features.harmonics import HarmonicFeatures, extract_harmonics
 from bayeshopf.hybrid_posterior import (  # noqa: F401 (re-exported)
     N_PHI,
+    RIG,
     HybridPosterior,
     log_likelihood_program,
 )
@@ -92,6 +94,7 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     map_point = ci.fit_map(inputs, max_steps=settings.lbfgs_steps)
     timings["map"] = time.perf_counter() - t0
     run = ci.sample_posterior(inputs, map_point, settings, seed=seed, progress=progress)
+    run = with_rig_bifurcations(run, spec, features, settings.mu_discrepancy, seed)
     timings["posterior"] = run.seconds
     post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
                            timings=timings)
@@ -101,6 +104,30 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     post.diagnostics.update(diagnose(post))
     timings["diagnostics"] = time.perf_counter() - t0
     return post
+
+
+def with_rig_bifurcations(run: ci.PosteriorRun, spec: cm.CollapsedSpec,
+                          features: HarmonicFeatures, kappa: float, seed: int) -> ci.PosteriorRun:
+    """``run`` with the rig's Hopf point and fold, ``mu0_rig`` and ``mu_fold_rig`` (per draw).
+
+    The normal form's points moved by the discrepancy in μ
+    (:func:`~bayeshopf.model.bifurcation_shift.shift_draws`, ``κ = kappa``, its
+    normal pairs drawn from ``seed``); ``run`` itself without the model
+    discrepancy or with ``kappa`` 0.
+    """
+    if not spec.has_discrepancy or kappa == 0:
+        return run
+    import jax
+
+    from bayeshopf.model.bifurcation_shift import shift_draws
+
+    samples = run.samples
+    theta = {k: v for k, v in samples.items() if not k.startswith("marginal")}
+    moved = shift_draws(spec, theta, features.mu, np.where(features.unstable, -1.0, 1.0),
+                        kappa, jax.random.PRNGKey(seed))
+    shape = np.shape(run.chains["mu0"])
+    chains = {**run.chains, **{f"{k}{RIG}": v.reshape(shape) for k, v in moved.items()}}
+    return replace(run, chains=chains)
 
 
 def fit_hybrid(

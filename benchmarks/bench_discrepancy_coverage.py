@@ -110,7 +110,8 @@ def fit_one(rs, model: str) -> dict:
     from bayeshopf.inference.collapsed import CollapsedSettings
     from bayeshopf.posterior import fit_hybrid
 
-    settings = replace(CollapsedSettings(), **MODELS[model])
+    # the normal form's own Hopf point and fold (kernel_s's rows add the moved ones)
+    settings = replace(CollapsedSettings(), **{"mu_discrepancy": 0.0, **MODELS[model]})
     t0 = time.perf_counter()
     post = fit_hybrid(rs, "subcritical", seed=0, settings=settings,
                       progress=bool(os.environ.get("BENCH_PROGRESS")))

@@ -562,6 +562,38 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
         assert "a positive number expected" in err and not seen
 
 
+def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
+    """``--mu-discrepancy`` sets κ of the discrepancy in μ (2 by default); without
+    ``--discrepancy``, negative or not finite it is a one-line error before any fit."""
+    import bayeshopf.posterior
+    from bayeshopf.errors import FitError
+
+    seen = {}
+
+    def stop(rs, criticality, **kw):   # the fit itself is tested elsewhere
+        seen.update(kw)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
+    base = ["demo", "--fast", "--no-figures", "--discrepancy"]
+    assert main([*base, "--out", str(tmp_path / "a"), "--mu-discrepancy", "0.5"]) == 2
+    capsys.readouterr()
+    assert seen["settings"].mu_discrepancy == 0.5
+    seen.clear()
+    assert main([*base, "--out", str(tmp_path / "b")]) == 2
+    capsys.readouterr()
+    assert seen["settings"].mu_discrepancy == 2.0
+    for args, why in (([*base, "--mu-discrepancy", "-1"], "a finite number ≥ 0 expected"),
+                      ([*base, "--mu-discrepancy", "inf"], "a finite number ≥ 0 expected"),
+                      (["demo", "--fast", "--no-figures", "--mu-discrepancy", "1"],
+                       "needs --discrepancy")):
+        seen.clear()
+        assert main([*args, "--out", str(tmp_path / "c")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--mu-discrepancy" in err, err
+        assert why in err and not seen
+
+
 def test_nn_width_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
     """``--nn-width inf`` fits the network at infinite width, a number its hidden units;
     anything else is a one-line error before any fit."""

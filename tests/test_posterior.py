@@ -153,6 +153,35 @@ def test_new_measurement_band_widens_away_from_the_recordings_only(planted, tmp_
     np.testing.assert_allclose([saved.lo, saved.median, saved.hi], wide_b, rtol=1e-9)
 
 
+def test_the_rigs_bifurcations_are_the_moved_points_and_hold_the_planted_ones(
+        planted_discrepancy, tmp_path):
+    """With the discrepancy the fit's μ0 and fold are the normal form's moved by the
+    discrepancy in μ (its draws, from the fit's seed); they hold the planted points, the
+    orbits keep the normal form's own, and a saved fit reports the same."""
+    import jax
+
+    from bayeshopf import fit_folder
+    from bayeshopf.diagnostics.summaries import interval
+    from bayeshopf.fit_summary import summary_hybrid
+    from bayeshopf.model.bifurcation_shift import shift_draws
+
+    post, _, truth = planted_discrepancy
+    f = post.features
+    want = shift_draws(post.spec, post.theta, f.mu, np.where(f.unstable, -1.0, 1.0),
+                       post.settings.mu_discrepancy, jax.random.PRNGKey(post.seed))
+    for k in ("mu0", "mu_fold"):
+        np.testing.assert_array_equal(post.samples[k + "_rig"], want[k])
+        assert post.interval(k) == interval(want[k], 0.9)
+        assert k + "_rig" not in post.theta
+    assert post.interval("mu0").contains(truth.mu0)
+    assert post.interval("mu_fold").contains(truth.mu_fold)
+    s = summary_hybrid(post)
+    assert s["normal_form_points"]["mu0"] == interval(post.samples["mu0"], 0.9).to_json()
+    fit_folder.save_hybrid(post, tmp_path / "fit")
+    saved = fit_folder.load_fit(tmp_path / "fit")
+    assert saved.posterior.interval("mu_fold") == post.interval("mu_fold")
+
+
 def test_the_discrepancy_is_known_at_the_recordings_and_the_prior_far_away(planted_discrepancy):
     """The discrepancy's smooth part: known at a training orbit given the latent draws (its
     conditional variance a tiny fraction of the prior's), back to the prior's far beyond

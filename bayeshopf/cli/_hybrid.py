@@ -47,6 +47,10 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="fit with the model discrepancy, a Gaussian process over the diagram "
                    "on the orbits' fundamental whose scale is sampled with the Hopf point and "
                    "the fold (docs/model_discrepancy.md; not yet the default)")
+    p.add_argument("--mu-discrepancy", type=float, default=None, metavar="K",
+                   help="with --discrepancy: κ of its twin in μ, which moves the Hopf point "
+                   "and the fold by the model's error beyond the recordings (default 2; 0 "
+                   "reports the normal form's own points)")
     p.add_argument("--nn-width", default=None, metavar="H",
                    help="hidden units of the map's network (default 16), or 'inf' for its "
                    "limit of infinite width, a Gaussian process with the network's kernel "
@@ -77,6 +81,12 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
                        "2%)")
     if getattr(args, "nn_width", None) is not None:
         _nn_width(args.nn_width)
+    k = getattr(args, "mu_discrepancy", None)
+    if k is not None and not (math.isfinite(k) and k >= 0):
+        raise FitError(f"--mu-discrepancy {k:g}: a finite number ≥ 0 expected (default 2; 0: "
+                       "the normal form's own Hopf point and fold)")
+    if k is not None and not getattr(args, "discrepancy", False):
+        raise FitError("--mu-discrepancy sets the discrepancy in μ, which needs --discrepancy")
     check_out(out, args.force)
     worker = None
     if not args.no_figures:   # imports beside NUTS, and a figure process
@@ -98,6 +108,8 @@ def _settings(args) -> inference.CollapsedSettings:
                        discrepancy=bool(getattr(args, "discrepancy", False)))
     if getattr(args, "extrapolation_scale", None) is not None:
         settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
+    if getattr(args, "mu_discrepancy", None) is not None:
+        settings = replace(settings, mu_discrepancy=args.mu_discrepancy)
     width = getattr(args, "nn_width", None)
     if width is not None:
         settings = replace(settings, nn_width=_nn_width(width))

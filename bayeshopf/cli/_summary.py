@@ -55,6 +55,16 @@ def print_table(summary: dict, truth: dict | None = None) -> None:
     if curved:
         print("(curved unfolding β(μ) = (exp(b(μ−μ0)) − 1)/b, w = b(μ0 − μ_fold); a2 is its "
               "cubic coefficient, β(μ_fold) = −a2²/4)")
+    own = summary.get("normal_form_points")
+    if own:
+        parts = [f"{k} {format_interval(v['median'], *v[key])[0]} "
+                 f"[{', '.join(format_interval(v['median'], *v[key])[1:])}]"
+                 for k, v in own.items()]
+        kappa = summary.get("settings", {}).get("mu_discrepancy")
+        print(textwrap.fill(
+            f"(mu0 and mu_fold are the rig's: the normal form's own points, {'; '.join(parts)} "
+            f"{u}, moved by the discrepancy in μ, κ = {kappa:g}; docs/model_discrepancy.md)",
+            88))
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
           f"{'predicted (' + pct + ')':>30s}  [{au}]")

@@ -21,6 +21,11 @@ from bayeshopf.features.harmonics import HarmonicFeatures
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import discrepancy as dm
 
+#: ``κ`` of the discrepancy in μ (:mod:`bayeshopf.model.bifurcation_shift`), chosen
+#: by the interval scores of μ0 and the fold on a development block of simulated
+#: rigs and tested on a fresh one (``docs/model_discrepancy.md``).
+MU_DISCREPANCY = 2.0
+
 
 def _positive_or_none(x) -> bool:
     """Whether ``x`` is ``None`` or a finite number > 0 (not a bool)."""
@@ -94,6 +99,12 @@ class CollapsedSettings:
         discrepancy_floor: ``κ``, the floor of the discrepancy's scale near the
             Hopf point relative to its training mean
             (:func:`~bayeshopf.model.discrepancy.scales`; 0: purely relative).
+        mu_discrepancy: With the discrepancy, ``κ`` of its twin in μ at the Hopf
+            point and the fold (:mod:`bayeshopf.model.bifurcation_shift`): the
+            fit's ``mu0`` and ``mu_fold`` intervals are the rig's, the normal
+            form's points moved by an error in μ of ``κ η G`` times a unit
+            process held at zero at the recordings; 0 reports the normal form's
+            own points.
     """
 
     n_harmonics: int = 4
@@ -120,6 +131,7 @@ class CollapsedSettings:
     extrapolation_scale: float | None = None
     discrepancy: bool = False
     discrepancy_floor: float = dm.FLOOR
+    mu_discrepancy: float = MU_DISCREPANCY
 
     def __post_init__(self):
         w = self.nn_width
@@ -133,6 +145,10 @@ class CollapsedSettings:
         if v != 1.0 and w is not None:
             raise FitError("nn_mu_scale: the network's input scale on μ is set only at "
                            f"infinite width (nn_width=None); got nn_width={w!r}")
+        k = self.mu_discrepancy
+        if isinstance(k, bool) or not isinstance(k, int | float) or not (0 <= k < math.inf):
+            raise FitError("mu_discrepancy: a finite number ≥ 0 expected (κ of the discrepancy "
+                           f"in μ at the Hopf point and the fold; 0: none); got {k!r}")
         s = self.extrapolation_scale
         if not _positive_or_none(s):
             raise FitError("extrapolation_scale: a positive number or None expected (the "

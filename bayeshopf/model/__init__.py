@@ -5,6 +5,7 @@
 :mod:`~bayeshopf.model.marginal` (the collapsed Gaussian),
 :mod:`~bayeshopf.model.frequency` (the phase speed),
 :mod:`~bayeshopf.model.discrepancy` (the model discrepancy),
+:mod:`~bayeshopf.model.bifurcation_shift` (its twin in μ at the Hopf point and the fold),
 :mod:`~bayeshopf.model.horizontal` (experiments: the diagram's curve with a Gaussian
 process in its curvature, or with a window in its curvature at the fold),
 :mod:`~bayeshopf.model.network_kernel` (the map's network at infinite width),
