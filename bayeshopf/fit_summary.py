@@ -22,7 +22,6 @@ def _finite_or_none(x: float) -> float | None:
 COLLAPSED_CORE = "collapsed"
 
 
-
 def _normal_form_points(post, ci: float) -> dict | None:
     """The normal form's own Hopf point and fold, where the discrepancy in μ moved the fit's."""
     if "mu0" + RIG not in post.samples:
