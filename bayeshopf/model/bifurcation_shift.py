@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf.model import discrepancy as dm
+from bayeshopf.model.collapsed import spec_jit
 from bayeshopf.model.spec import CollapsedSpec, radius, reference_radius
 
 #: Jitter of the conditional covariance's Cholesky factor (the endpoints may
@@ -119,9 +120,13 @@ def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -
                          "got a model without it")
     names = ["mu0"] + (["mu_fold"] if spec.criticality == "subcritical" else [])
     th = {k: jnp.asarray(v, dtype=float) for k, v in theta.items()}
-    n_draws = th["mu0"].shape[0]
-    xi = jax.random.normal(key, (n_draws, 2))
-    mu, sign = jnp.asarray(mu, dtype=float), jnp.asarray(sign, dtype=float)
-    moved = jax.vmap(lambda t, z: jnp.stack(
-        _moved(spec, t, _one(spec, t, mu, sign, kappa, z))))(th, xi)
+    xi = jax.random.normal(key, (th["mu0"].shape[0], 2))
+    moved = spec_jit(spec, _all)(th, xi, jnp.asarray(mu, dtype=float),
+                                 jnp.asarray(sign, dtype=float), jnp.asarray(kappa, dtype=float))
     return {n: np.asarray(moved[:, j]) for j, n in enumerate(names)}
+
+
+def _all(spec: CollapsedSpec, theta: dict, xi, mu, sign, kappa):
+    """The moved points of every draw, ``(S, m)`` (compiled once per spec, :func:`shift_draws`)."""
+    return jax.vmap(lambda t, z: jnp.stack(
+        _moved(spec, t, _one(spec, t, mu, sign, kappa, z))))(theta, xi)
