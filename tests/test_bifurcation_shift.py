@@ -36,7 +36,7 @@ def _theta(n: int, eta: float = 0.02, ell: float = 0.5) -> dict:
     mu0, fold, w = 17.0, 14.9, 0.3
     beta = -float(cm.unfolding(fold, mu0, w, fold))
     one = {"mu0": mu0, "mu_fold": fold, "w_unfold": w, "a2": 2.0 * np.sqrt(beta),
-           "eta": eta, "ell": ell}
+           "eta": eta, "ell": ell, "gap_fold": min(MU) - fold, "gap_hopf": mu0 - 16.4}
     return {k: np.full(n, v) for k, v in one.items()}
 
 

@@ -57,9 +57,8 @@ def print_table(summary: dict, truth: dict | None = None) -> None:
               "cubic coefficient, β(μ_fold) = −a2²/4)")
     own = summary.get("normal_form_points")
     if own:
-        parts = [f"{k} {format_interval(v['median'], *v[key])[0]} "
-                 f"[{', '.join(format_interval(v['median'], *v[key])[1:])}]"
-                 for k, v in own.items()]
+        shown = {k: format_interval(v["median"], *v[key]) for k, v in own.items()}
+        parts = [f"{k} {m} [{a}, {b}]" for k, (m, a, b) in shown.items()]
         kappa = summary.get("settings", {}).get("mu_discrepancy")
         print(textwrap.fill(
             f"(mu0 and mu_fold are the rig's: the normal form's own points, {'; '.join(parts)} "

@@ -81,20 +81,17 @@ def _one(spec: CollapsedSpec, theta: dict, mu, sign, kappa, xi):
 def _moved(spec: CollapsedSpec, theta: dict, eps):
     """The points moved by ``eps`` (Hopf, fold), each beyond the recordings it must lie beyond.
 
-    A point at distance ``d`` beyond its anchor (the fold below the lowest
-    recording, the Hopf point above the highest unstable one, or below the
-    lowest recording without a fold) moves to ``d e^{±ε/d}`` from it: by ``ε``
-    to first order, never across the anchor.
+    A point at distance ``d`` beyond its anchor (the model's gaps: the fold
+    ``g_fold`` below the lowest recording, the Hopf point ``g_hopf`` above the
+    highest unstable one, or below the lowest recording without a fold) moves
+    to ``d e^{±ε/d}`` from it: by ``ε`` to first order, never across the anchor.
     """
-    mu0 = theta["mu0"]
+    g_h = theta["gap_hopf"]
     if spec.criticality != "subcritical":
-        d = spec.mu_min - mu0
-        return [spec.mu_min - d * jnp.exp(-eps[0] / d)]
-    fold = theta["mu_fold"]
-    d_f = spec.mu_min - fold
-    anchor = fold if spec.mu_unstable_max is None else jnp.maximum(fold, spec.mu_unstable_max)
-    d_0 = mu0 - anchor
-    return [anchor + d_0 * jnp.exp(eps[0] / d_0), spec.mu_min - d_f * jnp.exp(-eps[1] / d_f)]
+        return [theta["mu0"] - g_h * jnp.expm1(-eps[0] / g_h)]
+    g_f = theta["gap_fold"]
+    return [theta["mu0"] + g_h * jnp.expm1(eps[0] / g_h),
+            theta["mu_fold"] - g_f * jnp.expm1(-eps[1] / g_f)]
 
 
 def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -> dict:
@@ -102,8 +99,9 @@ def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -
 
     Args:
         spec: The model (with the discrepancy, ``spec.has_discrepancy``).
-        theta: Posterior draws of the sites, each ``(S,)`` (``mu0``, ``a2``,
-            ``eta``, ``ell``, and ``mu_fold`` and ``w_unfold`` when subcritical).
+        theta: Posterior draws of the sites, each ``(S,)`` (``mu0``, ``gap_hopf``,
+            ``a2``, ``eta``, ``ell``, and ``mu_fold``, ``gap_fold`` and ``w_unfold``
+            when subcritical).
         mu: μ of the training recordings ``(n,)``.
         sign: Their branch signs ``(n,)``.
         kappa: ``κ``; 0 gives the model's own points.
