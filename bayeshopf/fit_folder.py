@@ -267,6 +267,14 @@ class SavedHybrid:
 
         if "gamma" not in self.samples:
             return None
+        if "mu0_rig" in self.samples:          # the rig's branches: the rebuilt fit's path
+            try:
+                f = self.posterior.frequency([mu], branch, predictive=predictive,
+                                             omega_se=self.predictive_omega_se)[:, 0]
+                f = f[np.isfinite(f)]
+                return interval(f, ci) if f.size else None
+            except DataError:
+                pass
         idx = pr.draw_indices(len(self.samples["gamma"]))
         theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
         f = pr.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],

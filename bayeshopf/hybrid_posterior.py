@@ -157,6 +157,46 @@ class HybridPosterior:
     def _draw_indices(self, n: int | None) -> np.ndarray:
         return draw_indices(self.run.betas.shape[0], n)
 
+    @cached_property
+    def _branch_knots(self) -> dict | None:
+        """Where each branch of the rig lies, per draw.
+
+        :func:`~bayeshopf.model.bifurcation_shift.branch_knots`;
+
+        ``None`` without the rig's points (no discrepancy in μ): the model's own.
+        """
+        s = self.samples
+        if "mu0" + RIG not in s:
+            return None
+        import jax
+
+        from bayeshopf.model.bifurcation_shift import branch_knots
+
+        f = self.features
+        rig = {k: s[k + RIG] for k in ("mu0", "mu_fold") if k + RIG in s}
+        return branch_knots(self.spec, self.theta, rig, f.mu, np.where(f.unstable, -1.0, 1.0),
+                            self.settings.mu_discrepancy,
+                            jax.random.fold_in(jax.random.PRNGKey(self.seed), 1))
+
+    def model_mu(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
+        """The model's μ of the point the rig has at each ``mu`` on ``branch``, ``(n, n_mu)``.
+
+        With the discrepancy in μ, each branch of the rig is the model's moved
+        along μ (:func:`~bayeshopf.model.bifurcation_shift.branch_knots`: the
+        same at the recordings, ending at the rig's Hopf point and fold), so a
+        prediction at μ is the model's at this μ; without it, ``mu`` itself
+        for every draw.
+        """
+        from bayeshopf.model.bifurcation_shift import model_mu
+
+        mu = np.atleast_1d(np.asarray(mu, dtype=float))
+        idx = self._draw_indices(n_draws)
+        knots = self._branch_knots
+        if knots is None:
+            return np.broadcast_to(mu, (idx.size, mu.size))
+        model, rig = knots[branch_sign(branch)]
+        return model_mu(mu, model[idx], rig[idx])
+
     def orbit_coefficients(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS,
                            control=None):
         """Harmonic coefficients of the predicted orbits in the frame, ``(n, n_mu, 2, 2K+1)``.
@@ -172,8 +212,9 @@ class HybridPosterior:
         """
         idx = self._draw_indices(n_draws)
         theta = {k: v[idx] for k, v in self.theta.items()}
-        c = orbit_coefficients(self.spec, theta, self.run.betas[idx], mu, branch_sign(branch),
-                               control=control)
+        c = orbit_coefficients(self.spec, theta, self.run.betas[idx],
+                               self.model_mu(mu, branch, n_draws), branch_sign(branch),
+                               per_draw=True, control=control)
         if self.spec.nn_training is not None:
             c = c + self._network(mu, branch, n_draws)
         if not self.spec.has_discrepancy:
@@ -183,7 +224,8 @@ class HybridPosterior:
     def _network(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
         """:func:`network_draws` at μ for the draws of ``n_draws``, once per μ and branch."""
         return self._memo("network", mu, branch, n_draws, lambda theta, idx, mu: network_draws(
-            self.spec, theta, mu, branch_sign(branch), self.seed))
+            self.spec, theta, self.model_mu(mu, branch, n_draws), branch_sign(branch),
+            self.seed))
 
     @cached_property
     def _discrepancy_memo(self) -> dict:
@@ -209,7 +251,8 @@ class HybridPosterior:
         """
         return self._memo("discrepancy", mu, branch, n_draws, lambda theta, idx, mu:
                           discrepancy_draws(self.spec, theta, self.run.betas[idx], self.features,
-                                            mu, branch_sign(branch), self.seed))
+                                            self.model_mu(mu, branch, n_draws),
+                                            branch_sign(branch), self.seed))
 
     def recording_control(self, i: int):
         """Recording ``i``'s control fundamental ``(1, 2)`` with the control term, else None."""
@@ -329,8 +372,9 @@ class HybridPosterior:
         idx = self._draw_indices(n_draws)
         se = float(np.median(self.features.omega_se)) if omega_se is None else omega_se
         return frequency_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                               self.run.gammas[idx], mu, branch_sign(branch), predictive=predictive,
-                               omega_se=se, seed=self.seed)
+                               self.run.gammas[idx], self.model_mu(mu, branch, n_draws),
+                               branch_sign(branch), predictive=predictive, omega_se=se,
+                               seed=self.seed)
 
     def frequency_band(self, mu, branch: str = "stable", predictive: bool = False,
                        ci: float = CI) -> FrequencyBand:
@@ -429,7 +473,7 @@ class HybridPosterior:
         to_hopf = p_to_hopf = None
         sub = self.criticality == "subcritical"
         if sub == (branch == "unstable"):      # this branch shrinks into the Hopf point
-            mu0 = np.asarray(self.samples["mu0"])[self._draw_indices(N_BAND_DRAWS)][:, None]
+            mu0 = self.bifurcation("mu0")[self._draw_indices(N_BAND_DRAWS)][:, None]
             past = (np.asarray(mu)[None] > mu0) if sub else (np.asarray(mu)[None] < mu0)
             to_hopf, p_to_hopf = quantiles(np.where(np.isnan(amp) & past, 0.0, amp), at)
         return BranchBand(int(branch_sign(branch)), np.asarray(mu), q, p, qp, at, to_hopf,

@@ -31,6 +31,12 @@ from bayeshopf.model import normal_form
 N_BAND_DRAWS = 500
 
 
+def _per_draw(mu, n: int) -> np.ndarray:
+    """μ as one row per draw, ``(n, n_mu)``, from ``(n_mu,)`` (every draw's) or ``(n, n_mu)``."""
+    mu = np.asarray(mu, dtype=float)
+    return mu if mu.ndim == 2 else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
+
+
 def _common_over_mu(rng, shape) -> np.ndarray:
     """Standard normals for coefficient draws ``(n, n_mu, …)``, one set per draw for every μ.
 
@@ -95,7 +101,7 @@ def _orbit_program(spec: cm.CollapsedSpec):
 
 
 def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
-    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid, ``(n, n_mu)``."""
+    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid per draw ``(n, n_mu)``."""
     th = {k: v[:, None] for k, v in th.items()}
     return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
 
@@ -119,8 +125,7 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     """
     ensure_x64()
     n = np.shape(betas)[0]
-    mu = np.asarray(mu, dtype=float)
-    mu = mu if per_draw else np.broadcast_to(np.atleast_1d(mu), (n, np.atleast_1d(mu).size))
+    mu = np.asarray(mu, dtype=float) if per_draw else _per_draw(mu, n)
     th = {k: jnp.asarray(v) for k, v in theta.items()}
     # stored (inference.cache.compiled_call): a warm process neither traces nor lowers it
     c = np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
@@ -137,12 +142,14 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
                     ) -> np.ndarray:
     """Frequency (Hz) draws ``(n, n_mu)`` at μ for draws ``(θ, γ)``; ``nan`` where no LCO.
 
+    ``mu``: ``(n_mu,)``, or ``(n, n_mu)``, one row per draw.
+
     With ``predictive``, each draw gets a new recording's error
     ``N(0, σ_ω² + omega_se²)`` (rad/s): one standard-normal number per draw for
     every μ, so that a band over μ is smooth while each μ's marginal is exact.
     """
     ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    mu = _per_draw(mu, np.shape(gammas)[0])
     th = {k: jnp.asarray(v) for k, v in theta.items()}
     om = np.asarray(compiled_call(
         "frequency-grid", lambda: lambda *a: _frequency_grid(spec, *a),
@@ -182,7 +189,7 @@ def _discrepancy_program(spec: cm.CollapsedSpec):
     """``(θ, β, training μ and signs, μ, sign) ↦ (mean, var, nugget)`` of ``Δ`` per draw."""
     from bayeshopf.model import discrepancy as dm
 
-    def one(a, mu_ref, sign_ref, mu, sign):
+    def one(a, mu_ref, sign_ref, mu, sign):       # mu: this draw's
         t, b = a
         g_ref, x_ref = cm.discrepancy_geometry(spec, t, mu_ref, sign_ref, mu_ref, sign_ref)
         g, x = cm.discrepancy_geometry(spec, t, mu, sign * jnp.ones_like(mu), mu_ref, sign_ref)
@@ -193,17 +200,18 @@ def _discrepancy_program(spec: cm.CollapsedSpec):
         return mean, var, (t["sigma_rel"] * g) ** 2
 
     return lambda th, b, mu_ref, sign_ref, mu, sign: jax.lax.map(
-        lambda a: one(a, mu_ref, sign_ref, mu, sign), (th, b))
+        lambda a: one(a[:2], mu_ref, sign_ref, a[2], sign), (th, b, mu))
 
 
 def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
                         mu, sign: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The discrepancy's conditional mean and variance at μ per draw, and ``(σ_rel g)²``.
 
-    Each ``(n, n_mu, 2, 2K+1)`` (:func:`discrepancy_draws`).
+    Each ``(n, n_mu, 2, 2K+1)`` (:func:`discrepancy_draws`); ``mu`` ``(n_mu,)``,
+    or ``(n, n_mu)``, one row per draw.
     """
     ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    mu = _per_draw(mu, np.shape(betas)[0])
     th = {k: jnp.asarray(v) for k, v in theta.items()}
     ref_sign = np.where(features.unstable, -1.0, 1.0)
     return tuple(np.asarray(a) for a in compiled_call(
@@ -238,7 +246,7 @@ def _network_program(spec: cm.CollapsedSpec):
         var = nk.conditional_var(spec, t, mu, sign * jnp.ones_like(mu), cm.N_PHI)   # (n_mu, M)
         return (spec.orbit_scale * t["tau_shape"]) ** 2 * var
 
-    return lambda th, mu, sign: jax.lax.map(lambda t: one(t, mu, sign), th)
+    return lambda th, mu, sign: jax.lax.map(lambda a: one(a[0], a[1], sign), (th, mu))
 
 
 def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: int) -> np.ndarray:
@@ -251,20 +259,22 @@ def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: in
     recording); this draws the rest, one set of standard normals per draw for
     every μ (smooth bands, exact marginals). Zero for a network of finite width.
 
+    ``mu``: ``(n_mu,)``, or ``(n, n_mu)``, one row per draw.
+
     Returns:
         ``(n, n_mu, 2, 2K+1)``; ``nan`` where a draw has no orbit on the branch.
     """
     ensure_x64()
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
     n = len(next(iter(theta.values())))
+    mu = _per_draw(mu, n)
     M = 2 * spec.n_harmonics + 1
     if spec.nn_training is None:
-        return np.zeros((n, mu.size, 2, M))
+        return np.zeros((n, mu.shape[1], 2, M))
     th = {k: jnp.asarray(v) for k, v in theta.items()}
     var = np.asarray(compiled_call("network", lambda: _network_program(spec),
                                    (th, jnp.asarray(mu), np.float64(sign)),
                                    key=_spec_key(spec)))                       # (n, n_mu, M)
-    eps = _common_over_mu(np.random.default_rng([seed, 4]), (n, mu.size, 2, M))
+    eps = _common_over_mu(np.random.default_rng([seed, 4]), (n, mu.shape[1], 2, M))
     return np.sqrt(var)[:, :, None, :] * eps
 
 

@@ -1,7 +1,7 @@
 """Leave-one-out on the wind-tunnel rig: coverage, width and log predictive density.
 
 Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--discrepancy]
-[--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U]``.
+[--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U] [--own-too]``.
 Each of the rig's 7 recordings is held out in turn, the model refitted on the
 others (seed 0) and the held-out amplitude predicted with its 90% band
 (``bayeshopf.validation.leave_one_out``, the refits kept). The log predictive
@@ -10,7 +10,9 @@ predictive draws (``amplitude(predictive=True)`` with the recording's standard
 errors and control) at the measured amplitude, times the share of draws in which
 the branch exists. It uses only names every bayeshopf since 0.1 has, so
 ``PYTHONPATH`` may point at an older checkout to score its bands the same way.
-Writes ``benchmarks/results/loo_rig_LABEL.json``.
+Writes ``benchmarks/results/loo_rig_LABEL.json``; with ``--own-too`` also
+``loo_rig_LABEL_own.json``, the same refits scored with the normal form's own
+branches (the rig's Hopf point and fold dropped, :func:`own_branches`).
 """
 
 import json
@@ -55,31 +57,45 @@ def main(argv):
                           segment_periods=settings.segment_periods)
     loo = leave_one_out(f, "subcritical", methods=("bayes",), seed=0, settings=settings,
                         keep_fits=True, progress=True)
-    res = {"label": label, **score(loo, f)}
     OUT.mkdir(exist_ok=True)
-    (OUT / f"loo_rig_{label}.json").write_text(json.dumps(res, indent=1, default=float))
-    print(label, res["inside"], "/", res["n"], "width", res["mean_width"], "lpd",
-          res["log_predictive_density"])
+    both = [(label, False)] + ([(label + "_own", True)] if "--own-too" in argv else [])
+    for name, own in both:
+        res = {"label": name, **score(loo, f, own)}
+        (OUT / f"loo_rig_{name}.json").write_text(json.dumps(res, indent=1, default=float))
+        print(name, res["inside"], "/", res["n"], "width", res["mean_width"], "lpd",
+              res["log_predictive_density"])
 
 
-def score(loo, f) -> dict:
+def own_branches(fit):
+    """``fit`` without the rig's points (``*_rig`` draws): the normal form's own branches."""
+    chains = {k: v for k, v in fit.run.chains.items() if not k.endswith("_rig")}
+    return replace(fit, run=replace(fit.run, chains=chains))
+
+
+def score(loo, f, own: bool = False) -> dict:
     """Inside count, mean width and summed log predictive density of held-out amplitudes.
 
     ``loo``: :func:`bayeshopf.validation.leave_one_out`'s result with its refits
-    kept; ``f``: the features it was made from.
+    kept; ``f``: the features it was made from; ``own``: score each refit with
+    the normal form's own branches (:func:`own_branches`). The 90% band is the
+    5%–95% quantiles of the predictive draws where the branch exists, as
+    ``leave_one_out``'s own prediction.
     """
     rows = []
     for i, fold in enumerate(loo.folds):
         p = fold.predictions["bayes"]
+        fit = own_branches(fold.fit) if own else fold.fit
         control = None if f.control is None else f.control[i][None]
-        amp = fold.fit.amplitude([fold.mu], fold.branch, predictive=True,
-                                 coeffs_se=f.coeffs_se[i], control=control)[:, 0]
+        amp = fit.amplitude([fold.mu], fold.branch, predictive=True,
+                            coeffs_se=f.coeffs_se[i], control=control)[:, 0]
         ok = np.isfinite(amp)
         lpd = (float(np.log(ok.mean()) + gaussian_kde(amp[ok]).logpdf(fold.measured)[0])
                if ok.sum() > 1 else -np.inf)
+        lo, hi = np.quantile(amp[ok], [0.05, 0.95]) if ok.any() else (np.nan, np.nan)
         rows.append({"name": fold.name, "mu": fold.mu, "branch": fold.branch,
-                     "measured": fold.measured, "median": p.median, "lo": p.lo, "hi": p.hi,
-                     "inside": bool(p.lo <= fold.measured <= p.hi), "log_density": lpd,
+                     "measured": fold.measured, "median": float(np.median(amp[ok])),
+                     "lo": float(lo), "hi": float(hi),
+                     "inside": bool(lo <= fold.measured <= hi), "log_density": lpd,
                      "mu0": list(p.mu0), "mu_fold": list(p.mu_fold)})
     return {"inside": sum(r["inside"] for r in rows), "n": len(rows),
             "mean_width": float(np.mean([r["hi"] - r["lo"] for r in rows])),

@@ -110,3 +110,80 @@ def test_needs_the_discrepancy():
     spec = dataclasses.replace(_spec(), discrepancy_scale=None)
     with pytest.raises(ValueError, match="model discrepancy"):
         bs.shift_draws(spec, _theta(3), MU, SIGN, 1.0, jax.random.PRNGKey(0))
+
+
+# ------------------------------------------------------------------ along the branches
+def _knots(theta, rig, kappa, seed=0):
+    return bs.branch_knots(_spec(), theta, rig, MU, SIGN, kappa, jax.random.PRNGKey(seed))
+
+
+def test_the_rigs_branches_pass_through_the_recordings_and_end_at_its_points():
+    theta = _theta(300, eta=0.1)
+    rig = bs.shift_draws(_spec(), theta, MU, SIGN, 2.0, jax.random.PRNGKey(5))
+    knots = _knots(theta, rig, 2.0)
+    for b in (1.0, -1.0):
+        model, moved = knots[b]
+        assert np.all(np.diff(moved, axis=1) >= 0)
+        at = np.array([m for m, s in zip(MU, SIGN, strict=True) if s == b])
+        np.testing.assert_allclose(bs.model_mu(at, model, moved), np.broadcast_to(at, (300, 3)),
+                                   rtol=0, atol=1e-12)
+        # the fold: where both branches start, in the rig and in the model
+        for s in range(0, 300, 37):
+            assert bs.model_mu([rig["mu_fold"][s]], model[s:s + 1], moved[s:s + 1])[0, 0] == \
+                pytest.approx(theta["mu_fold"][s], abs=1e-9)
+    model, moved = knots[-1.0]
+    np.testing.assert_allclose(moved[:, -1], rig["mu0"], atol=1e-12)
+    np.testing.assert_allclose(model[:, -1], theta["mu0"], atol=1e-12)
+    assert np.all(moved >= rig["mu_fold"][:, None]) and np.all(moved <= rig["mu0"][:, None])
+    # beyond the rig's Hopf point the unstable branch is the model's beyond its own
+    assert np.all(bs.model_mu([30.0], model, moved)[:, 0] > theta["mu0"])
+
+
+def test_kappa_zero_leaves_the_branches_where_the_model_has_them():
+    theta = _theta(20)
+    knots = _knots(theta, {"mu0": theta["mu0"], "mu_fold": theta["mu_fold"]}, 0.0)
+    mu = np.linspace(14.0, 20.0, 37)
+    for b in (1.0, -1.0):
+        np.testing.assert_allclose(bs.model_mu(mu, *knots[b]), np.broadcast_to(mu, (20, 37)),
+                                   atol=1e-12)
+
+
+def _dense_move(spec, theta, grid_mu, grid_sign, ends_move, ell, scale):
+    """Mean and sd of the move at points of the branches, by NumPy's dense solve."""
+    x, ends = _coordinates(spec, theta)
+    t = {k: v[0] for k, v in theta.items()}
+    r = np.asarray(cm.radius(spec, jnp.asarray(grid_mu), jnp.asarray(grid_sign), t))
+    r_rec = np.asarray(cm.radius(spec, jnp.asarray(MU), jnp.asarray(SIGN), t))
+    xg = np.stack([(grid_mu - spec.mu_centre) / spec.mu_span, r**2 / np.mean(r_rec**2)], -1)
+
+    def k(a, b):
+        return np.exp(-0.5 * np.sum((a[:, None] - b[None]) ** 2, -1) / ell**2)
+
+    xc = np.concatenate([x, ends])
+    w = np.linalg.solve(k(xc, xc), k(xc, xg))
+    mean = w.T @ np.concatenate([np.zeros(len(MU)), ends_move])
+    var = np.diag(k(xg, xg) - k(xg, xc) @ w)
+    return mean, scale * np.sqrt(var)
+
+
+def test_the_moves_along_the_branches_are_the_conditional_given_the_ends():
+    """Mean and sd at each point against the dense conditional given the recordings and the ends."""
+    spec, n = _spec(), 20_000
+    theta = _theta(n, eta=0.01)
+    ends_move = np.array([0.05, -0.04])
+    rig = {"mu0": theta["mu0"] + ends_move[0], "mu_fold": theta["mu_fold"] + ends_move[1]}
+    for b in (-1.0, 1.0):
+        model, moved = _knots(theta, rig, 1.0, seed=4)[b]
+        order = np.argsort(model, axis=1)                  # back to the model's order
+        model = np.take_along_axis(model, order, 1)
+        move = np.take_along_axis(moved, order, 1) - model
+        np.testing.assert_allclose(model, model[:1].repeat(n, 0))     # one grid for all draws
+        inner = ~np.isin(model[0], list(MU) + [17.0, 14.9])
+        mean, sd = _dense_move(spec, theta, model[0, inner], b, ends_move, 0.5,
+                               0.01 * (17.0 - 14.9))
+        got = move[:, inner]
+        ok = sd > 1e-3 * 0.01 * 2.1                        # where the process is not pinned
+        assert ok.sum() >= 10
+        se = sd / np.sqrt(n)
+        assert np.all(np.abs(got.mean(0) - mean) < 5 * se + 1e-9)
+        np.testing.assert_allclose(got.std(0)[ok], sd[ok], rtol=0.03)

@@ -157,7 +157,7 @@ def test_the_rigs_bifurcations_are_the_moved_points_and_hold_the_planted_ones(
         planted_discrepancy, tmp_path):
     """With the discrepancy the fit's μ0 and fold are the normal form's moved by the
     discrepancy in μ (its draws, from the fit's seed); they hold the planted points, the
-    orbits keep the normal form's own, and a saved fit reports the same."""
+    normal form's own stay in the summary, and a saved fit reports the same."""
     import jax
 
     from bayeshopf import fit_folder
@@ -180,6 +180,47 @@ def test_the_rigs_bifurcations_are_the_moved_points_and_hold_the_planted_ones(
     fit_folder.save_hybrid(post, tmp_path / "fit")
     saved = fit_folder.load_fit(tmp_path / "fit")
     assert saved.posterior.interval("mu_fold") == post.interval("mu_fold")
+
+
+def test_the_rigs_branches_end_at_its_points_and_pass_through_the_recordings(
+        planted_discrepancy, tmp_path):
+    """Each draw's predicted branches exist exactly between that draw's rig fold and Hopf
+    point (not the normal form's); at the training recordings the orbits are the normal
+    form's own; the frequency, and a saved fit's prediction, follow the same branches."""
+    from dataclasses import replace
+
+    from bayeshopf import fit_folder
+    from bayeshopf.predictive import N_BAND_DRAWS
+
+    post, _, _ = planted_discrepancy
+    own = replace(post, run=replace(post.run, chains={
+        k: v for k, v in post.run.chains.items() if not k.endswith("_rig")}))
+    idx = post._draw_indices(N_BAND_DRAWS)
+    mu0, fold = (post.samples[k + "_rig"][idx][:, None] for k in ("mu0", "mu_fold"))
+    assert np.mean(np.abs(post.samples["mu0_rig"] - post.samples["mu0"]) > 1e-3) > 0.2
+    lo, hi = np.quantile(fold, 0.02), np.quantile(mu0, 0.98)
+    mu = np.linspace(lo, hi, 41)
+    edge = (np.abs(mu[None] - mu0) < 1e-9) | (np.abs(mu[None] - fold) < 1e-9)
+    unstable = np.isfinite(post.amplitude(mu, "unstable"))
+    np.testing.assert_array_equal(unstable | edge, ((mu[None] > fold) & (mu[None] < mu0)) | edge)
+    stable = np.isfinite(post.amplitude(mu, "stable"))
+    np.testing.assert_array_equal(stable | edge, (mu[None] > fold) | edge)
+    np.testing.assert_array_equal(np.isfinite(post.frequency(mu, "unstable")) | edge,
+                                  unstable | edge)
+    assert not np.array_equal(unstable, np.isfinite(own.amplitude(mu, "unstable")))
+    f = post.features
+    for i in range(f.n_recordings):
+        b = "unstable" if f.unstable[i] else "stable"
+        np.testing.assert_allclose(post.orbit_coefficients([f.mu[i]], b),
+                                   own.orbit_coefficients([f.mu[i]], b), rtol=0, atol=1e-12)
+    between = float(np.quantile(post.samples["mu0"], 0.9))     # past most of the model's own
+    fit_folder.save_hybrid(post, tmp_path / "fit")
+    saved = fit_folder.load_fit(tmp_path / "fit")
+    p = saved.p_exists(between, "unstable")
+    assert p == pytest.approx(np.mean(post.samples["mu0_rig"][idx] > between), abs=1e-12)
+    iv = saved.frequency(between, "unstable")
+    want = post.frequency([between], "unstable")[:, 0]
+    assert iv.median == pytest.approx(np.nanmedian(want), rel=1e-12)
 
 
 def test_the_discrepancy_is_known_at_the_recordings_and_the_prior_far_away(planted_discrepancy):
