@@ -320,7 +320,8 @@ class SavedHybrid:
         if not np.isfinite(draws).any():
             raise DataError(
                 f"mu = {mu:g}: the {branch} branch does not exist there in any posterior "
-                f"draw (Hopf point μ0 ≈ {np.median(self.samples['mu0']):.4g}"
+                f"draw (Hopf point μ0 ≈ "
+                f"{np.median(self.samples.get('mu0_rig', self.samples['mu0'])):.4g}"
                 + (f", fold ≈ {self.summary['mu_fold']['median']:.4g}"
                    if self.summary.get("mu_fold") else "") + ")")
         return interval(draws, ci)

@@ -159,11 +159,10 @@ class HybridPosterior:
 
     @cached_property
     def _branch_knots(self) -> dict | None:
-        """Where each branch of the rig lies, per draw.
+        """Where each branch of the rig lies, per draw, or ``None`` without the rig's points.
 
-        :func:`~bayeshopf.model.bifurcation_shift.branch_knots`;
-
-        ``None`` without the rig's points (no discrepancy in μ): the model's own.
+        :func:`~bayeshopf.model.bifurcation_shift.branch_knots`; without the
+        discrepancy in μ the branches are the model's own.
         """
         s = self.samples
         if "mu0" + RIG not in s:

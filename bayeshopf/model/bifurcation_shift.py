@@ -30,6 +30,15 @@ The recordings do not see ``h`` (it vanishes where they are), so the
 likelihood is unchanged and the shift is drawn after NUTS, one standard
 normal pair per posterior draw (:func:`shift_draws`): the posterior predictive
 of the rig's bifurcation points under this discrepancy.
+
+The same process moves every point of the branches, not only their ends
+(:func:`branch_knots`): per draw, ``h`` is drawn at points along each branch
+given zero at the recordings and the values that put the ends at the rig's
+Hopf point and fold, and each point moves by ``κηG h``. A prediction at μ is
+the model's (orbit, discrepancy, network, frequency) at the point that moves
+to μ (:func:`model_mu`), so the rig's branches pass through every recording and
+end at the rig's points, and a new measurement beyond the recordings carries
+the horizontal error as well as the vertical one.
 """
 
 from __future__ import annotations
