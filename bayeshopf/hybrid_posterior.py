@@ -16,14 +16,10 @@ from functools import cached_property
 import numpy as np
 
 from bayeshopf.data.recording import RecordingSet
-from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand
+from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand, time_series_bands
 from bayeshopf.diagnostics.bifurcation import BranchBand, DiagramBands, quantiles
 from bayeshopf.diagnostics.bifurcation import levels as band_levels
-from bayeshopf.diagnostics.fit_checks import (
-    ORBIT_ERROR_MAX,
-    ORBIT_SPREAD_FACTOR,
-    orbit_error_parts,
-)
+from bayeshopf.diagnostics.fit_checks import orbit_errors
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import CI, Interval, interval
 from bayeshopf.errors import FitError
@@ -408,31 +404,7 @@ class HybridPosterior:
         frequency); the band then holds the frequency's and the orbit's uncertainty.
         ``recordings`` are the training recordings, in the order of the features.
         """
-        out = []
-        f = self.features
-        for i, r in enumerate(recordings):
-            z = r.planar(recordings.planar)
-            t = r.t - r.t[0]
-            om = float(f.omega[i])
-            t_end = n_periods * 2 * np.pi / om
-            window = t <= t_end
-            w = self.spec.frame.to_frame(z[window])
-            ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
-            phase0 = -float(np.arctan2(ab[2], ab[1]))
-            # a uniform grid of about 60 points per period; the measured value is the
-            # sample at each grid time, NaN where a sensor had no reading (left out of
-            # the recording), so that the drawn line breaks there
-            step = max(1, int(round(2 * np.pi / (om * 60 * r.dt)))) * r.dt
-            tg = np.arange(0.0, t_end + 0.5 * step, step)
-            idx = np.clip(np.searchsorted(t, tg), 0, t.size - 1)
-            near = np.where(np.abs(t[idx - 1] - tg) < np.abs(t[idx] - tg), idx - 1, idx)
-            meas = np.where(np.abs(t[near] - tg) <= 0.5 * r.dt, z[near, channel], np.nan)
-            pred = self.time_series(r.mu, r.branch, tg, phase0)[..., channel]
-            q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
-            name = recordings.planar[channel]
-            out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], tg,
-                                      meas, q[0], q[1], q[2]))
-        return out
+        return time_series_bands(self, recordings, n_periods, channel, ci)
 
     def frequency_check(self) -> list[dict]:
         """Each recording's measured frequency against its 90% predictive band (Hz)."""
@@ -605,25 +577,7 @@ class HybridPosterior:
         harmonic 1…K (:func:`~bayeshopf.diagnostics.fit_checks.orbit_error_parts`;
         their squares add up to ``relative``'s).
         """
-        f = self.features
-        phi = np.linspace(0, 2 * np.pi, N_PHI, endpoint=False)
-        out = []
-        for i, c in enumerate(self.training_coefficients):
-            c = c[np.all(np.isfinite(c), axis=(1, 2))]
-            data = reconstruct(f.coeffs[i], phi)
-            radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
-            if c.shape[0] == 0:
-                out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False,
-                            "by_harmonic": None})
-                continue
-            median = np.median(c, axis=0)
-            model = reconstruct(median, phi)
-            rel = float(np.sqrt(np.mean(np.sum((model - data) ** 2, -1)))) / radius
-            spread = float(f.segment_rms[i]) / radius
-            out.append({"name": f.names[i], "relative": rel, "spread": spread,
-                        "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread),
-                        "by_harmonic": (orbit_error_parts(median, f.coeffs[i]) / radius).tolist()})
-        return out
+        return orbit_errors(self, N_PHI)
 
 
 def log_likelihood_program(spec: cm.CollapsedSpec, theta: dict, features: HarmonicFeatures):

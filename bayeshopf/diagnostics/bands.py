@@ -1,7 +1,8 @@
 """Frequency and time-series bands: posterior summaries over μ and over time (immutable).
 
 Made by :class:`~bayeshopf.posterior.HybridPosterior` (``frequency_band``,
-``time_series_bands``); drawn by :mod:`bayeshopf.plotting.timeseries`.
+``time_series_bands``, through :func:`time_series_bands`); drawn by
+:mod:`bayeshopf.plotting.timeseries`.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from bayeshopf.features.harmonics import time_design
 
 
 @dataclass(frozen=True)
@@ -74,3 +77,38 @@ class FrequencyBand:
             q = np.where(ok, np.nanquantile(draws, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0),
                          np.nan)
         return cls(branch, np.asarray(mu, dtype=float), q[0], q[1], q[2])
+
+
+def time_series_bands(post, recordings, n_periods: float = 4.0, channel: int = 0,
+                      ci: float = 0.9) -> list[TimeSeriesBand]:
+    """:meth:`~bayeshopf.posterior.HybridPosterior.time_series_bands` of the fit ``post``.
+
+    Per recording, the measured channel on a uniform grid of about 60 points
+    per period over its first ``n_periods``, and the quantiles of
+    ``post.time_series`` started at the recording's phase at its first sample.
+    """
+    out = []
+    f = post.features
+    for i, r in enumerate(recordings):
+        z = r.planar(recordings.planar)
+        t = r.t - r.t[0]
+        om = float(f.omega[i])
+        t_end = n_periods * 2 * np.pi / om
+        window = t <= t_end
+        w = post.spec.frame.to_frame(z[window])
+        ab = np.linalg.lstsq(time_design(t[window], om, 1), w[:, 0], rcond=None)[0]
+        phase0 = -float(np.arctan2(ab[2], ab[1]))
+        # a uniform grid of about 60 points per period; the measured value is the
+        # sample at each grid time, NaN where a sensor had no reading (left out of
+        # the recording), so that the drawn line breaks there
+        step = max(1, int(round(2 * np.pi / (om * 60 * r.dt)))) * r.dt
+        tg = np.arange(0.0, t_end + 0.5 * step, step)
+        idx = np.clip(np.searchsorted(t, tg), 0, t.size - 1)
+        near = np.where(np.abs(t[idx - 1] - tg) < np.abs(t[idx] - tg), idx - 1, idx)
+        meas = np.where(np.abs(t[near] - tg) <= 0.5 * r.dt, z[near, channel], np.nan)
+        pred = post.time_series(r.mu, r.branch, tg, phase0)[..., channel]
+        q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
+        name = recordings.planar[channel]
+        out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], tg,
+                                  meas, q[0], q[1], q[2]))
+    return out

@@ -11,6 +11,7 @@ import numpy as np
 
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import CI, interval
+from bayeshopf.features.harmonics import reconstruct
 from bayeshopf.inference import nuts, optimum, svi
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import horizontal as hz
@@ -215,3 +216,26 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
                         + HOPF_FOLD_CAVEAT)
     d["warnings"] = warnings
     return d
+
+
+def orbit_errors(post, n_phi: int = 64) -> list[dict]:
+    """:meth:`~bayeshopf.posterior.HybridPosterior.orbit_error` of ``post``, at ``n_phi`` phases."""
+    f = post.features
+    phi = np.linspace(0, 2 * np.pi, n_phi, endpoint=False)
+    out = []
+    for i, c in enumerate(post.training_coefficients):
+        c = c[np.all(np.isfinite(c), axis=(1, 2))]
+        data = reconstruct(f.coeffs[i], phi)
+        radius = float(np.sqrt(np.mean(np.sum((data - data.mean(0)) ** 2, -1))))
+        if c.shape[0] == 0:
+            out.append({"name": f.names[i], "relative": None, "spread": None, "ok": False,
+                        "by_harmonic": None})
+            continue
+        median = np.median(c, axis=0)
+        model = reconstruct(median, phi)
+        rel = float(np.sqrt(np.mean(np.sum((model - data) ** 2, -1)))) / radius
+        spread = float(f.segment_rms[i]) / radius
+        out.append({"name": f.names[i], "relative": rel, "spread": spread,
+                    "ok": bool(rel <= ORBIT_ERROR_MAX or rel <= ORBIT_SPREAD_FACTOR * spread),
+                    "by_harmonic": (orbit_error_parts(median, f.coeffs[i]) / radius).tolist()})
+    return out
