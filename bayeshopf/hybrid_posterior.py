@@ -203,7 +203,8 @@ class HybridPosterior:
         infinite width the network's spread away from the recordings
         (:func:`network_draws`); with ``control``
         ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
-        that control, else the uncontrolled system's.
+        that control, else the uncontrolled system's. With the discrepancy in
+        μ, all of it at the model's point that the rig has at μ (:meth:`model_mu`).
         """
         idx = self._draw_indices(n_draws)
         theta = {k: v[idx] for k, v in self.theta.items()}
