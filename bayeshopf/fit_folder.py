@@ -267,20 +267,16 @@ class SavedHybrid:
 
         if "gamma" not in self.samples:
             return None
-        if "mu0_rig" in self.samples:          # the rig's branches: the rebuilt fit's path
-            try:
-                f = self.posterior.frequency([mu], branch, predictive=predictive,
-                                             omega_se=self.predictive_omega_se)[:, 0]
-                f = f[np.isfinite(f)]
-                return interval(f, ci) if f.size else None
-            except DataError:
-                pass
-        idx = pr.draw_indices(len(self.samples["gamma"]))
-        theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
-        f = pr.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
-                               branch_sign(branch), predictive=predictive,
-                               omega_se=self.predictive_omega_se,
-                               seed=int(self.summary.get("seed", 0)))[:, 0]
+        try:                        # the rebuilt fit's prediction (one path for every command)
+            f = self.posterior.frequency([mu], branch, predictive=predictive,
+                                         omega_se=self.predictive_omega_se)[:, 0]
+        except DataError:           # a folder of an older bayeshopf: from the draws alone
+            idx = pr.draw_indices(len(self.samples["gamma"]))
+            theta = {k: v[idx] for k, v in self.samples.items() if k not in ("beta", "gamma")}
+            f = pr.frequency_draws(self.spec, theta, self.samples["gamma"][idx], [mu],
+                                   branch_sign(branch), predictive=predictive,
+                                   omega_se=self.predictive_omega_se,
+                                   seed=int(self.summary.get("seed", 0)))[:, 0]
         f = f[np.isfinite(f)]
         return interval(f, ci) if f.size else None
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.features.harmonics import time_design
 
 
@@ -80,7 +81,7 @@ class FrequencyBand:
 
 
 def time_series_bands(post, recordings, n_periods: float = 4.0, channel: int = 0,
-                      ci: float = 0.9) -> list[TimeSeriesBand]:
+                      ci: float = CI) -> list[TimeSeriesBand]:
     """:meth:`~bayeshopf.posterior.HybridPosterior.time_series_bands` of the fit ``post``.
 
     Per recording, the measured channel on a uniform grid of about 60 points

@@ -218,7 +218,7 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
     return d
 
 
-def orbit_errors(post, n_phi: int = 64) -> list[dict]:
+def orbit_errors(post, n_phi: int) -> list[dict]:
     """:meth:`~bayeshopf.posterior.HybridPosterior.orbit_error` of ``post``, at ``n_phi`` phases."""
     f = post.features
     phi = np.linspace(0, 2 * np.pi, n_phi, endpoint=False)

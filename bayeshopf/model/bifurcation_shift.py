@@ -245,11 +245,11 @@ def branch_knots(spec: CollapsedSpec, theta: dict, rig: dict, mu, sign, kappa: f
                                             jnp.asarray(sign), jnp.asarray(kappa, dtype=float),
                                             jnp.asarray(mu_top))
     grid, move = np.asarray(grid), np.asarray(move)
+    start = "mu_fold" if sub else "mu0"           # where every branch starts
     out = {}
     for b, g, m in zip(branches, np.moveaxis(grid, 1, 0), np.moveaxis(move, 1, 0),
                        strict=True):
         rec = np.broadcast_to(mu[sign == b], (n_draws, int(np.sum(sign == b))))
-        start = "mu_fold" if sub else "mu0"
         cols_mu = [np.asarray(theta[start], float)[:, None], g, rec]
         cols_move = [moves[:, [names.index(start)]], m, np.zeros_like(rec)]
         if sub and b < 0:                        # the unstable branch ends at the Hopf point
