@@ -32,6 +32,12 @@ OrbitTruth = Callable[[float, str], np.ndarray]
 #: Most panels per row of the grid.
 MAX_COLUMNS = 4
 
+#: Posterior orbit draws shown per panel, by default.
+N_ORBITS = 60
+
+#: What is done with each recording's offset (its mean), by default.
+OFFSETS = "remove"
+
 
 def _closed(points: np.ndarray) -> np.ndarray:
     """The orbit with its first point appended (a closed curve)."""
@@ -91,12 +97,23 @@ def phase_panels(
     fit,
     recordings: RecordingSet,
     *,
-    n_orbits: int = 60,
+    n_orbits: int = N_ORBITS,
     max_points: int = 4000,
     truth: OrbitTruth | None = None,
-    offsets: str = "remove",
+    offsets: str = OFFSETS,
 ) -> list[PhasePanel]:
-    """The panels of :func:`plot_phase_portraits` (its arguments), one per recording."""
+    """The panels of :func:`plot_phase_portraits`, one per recording, as plain arrays.
+
+    Args:
+        fit: A :class:`~bayeshopf.posterior.HybridPosterior`, or anything with
+            ``orbits(mu, branch) -> draws (n, n_phi, 2)`` in physical units.
+        recordings: The recordings to show (normally the training set).
+        n_orbits: Posterior orbit draws shown per panel.
+        max_points: Most measured samples per panel (the record is subsampled
+            evenly).
+        truth: Optional ``truth(mu, branch) -> points (n, 2)``, the true orbit.
+        offsets: ``"remove"`` (each recording's mean subtracted) or ``"keep"``.
+    """
     check_offsets(offsets)
     # a training recording's orbit as it was held, with its control's response
     names = list(getattr(getattr(fit, "features", None), "names", ()))
@@ -127,14 +144,11 @@ def plot_phase_portraits(
     fit,
     recordings: RecordingSet,
     *,
-    n_orbits: int = 60,
-    max_points: int = 4000,
-    truth: OrbitTruth | None = None,
     mu_symbol: str = "μ",
-    offsets: str = "remove",
     length_unit: str | None = None,
     angle_unit: str | None = None,
     ax=None,
+    **panel_options,
 ) -> Figure:
     """Plot each recording's measured orbit over the posterior predicted orbits.
 
@@ -153,30 +167,30 @@ def plot_phase_portraits(
     them.
 
     Args:
-        fit: A :class:`~bayeshopf.posterior.HybridPosterior`, or anything with
-            ``orbits(mu, branch) -> draws (n, n_phi, 2)`` in physical units.
+        fit: The fit, as for :func:`phase_panels`.
         recordings: The recordings to show (normally the training set).
-        n_orbits: Posterior orbit draws drawn per panel.
-        max_points: Most measured samples drawn per panel (the record is
-            subsampled evenly).
-        truth: Optional ``truth(mu, branch) -> points (n, 2)``, drawn as a thin
-            black dashed closed curve.
         mu_symbol: Name of μ in the panel titles.
-        offsets: ``"remove"`` (each recording's mean subtracted) or ``"keep"``.
         length_unit: Draw channels in a length unit in this one (``"mm"``, …).
         angle_unit: Draw channels in an angle unit in this one (``"deg"``, …).
         ax: Axes to draw into, one per recording (a sequence or array of one
             figure; extra axes are hidden); a new figure when ``None``.
+        **panel_options: What the panels show, :func:`phase_panels`' keywords:
+            ``n_orbits`` (posterior orbit draws per panel, default 60),
+            ``max_points`` (most measured samples per panel, default 4000),
+            ``truth`` (``truth(mu, branch) -> points (n, 2)``, drawn as a thin
+            black dashed closed curve) and ``offsets`` (``"remove"``, the
+            default, or ``"keep"``).
 
     Returns:
         The figure, one axes per recording (and the legend: the figure's for a
         new figure, the first axes' otherwise).
     """
-    data = phase_panels(fit, recordings, n_orbits=n_orbits, max_points=max_points,
-                        truth=truth, offsets=offsets)
+    data = phase_panels(fit, recordings, **panel_options)
     return draw_phase_panels(data, recordings.planar, recordings.units[:2],
-                             mu_units=recordings.mu_units, n_orbits=n_orbits,
-                             mu_symbol=mu_symbol, offsets=offsets, length_unit=length_unit,
+                             mu_units=recordings.mu_units,
+                             n_orbits=panel_options.get("n_orbits", N_ORBITS),
+                             offsets=panel_options.get("offsets", OFFSETS),
+                             mu_symbol=mu_symbol, length_unit=length_unit,
                              angle_unit=angle_unit, ax=ax)
 
 
@@ -186,9 +200,9 @@ def draw_phase_panels(
     units: tuple[str, str],
     *,
     mu_units: str = "",
-    n_orbits: int = 60,
+    n_orbits: int = N_ORBITS,
     mu_symbol: str = "μ",
-    offsets: str = "remove",
+    offsets: str = OFFSETS,
     length_unit: str | None = None,
     angle_unit: str | None = None,
     ax=None,
