@@ -12,7 +12,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from bayeshopf import _preload, fit_folder, posterior, validation
@@ -21,43 +21,69 @@ from bayeshopf.errors import FitError
 from bayeshopf.inference import collapsed as inference
 
 
-def add_fit_options(p: argparse.ArgumentParser) -> None:
-    """The options ``fit`` and ``demo`` share."""
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--force", action="store_true",
-                   help="write into a non-empty output folder (replaces bayeshopf's files only)")
-    p.add_argument("--fast", action="store_true",
-                   help="short optimisation runs (smoke tests, CI); intervals less converged")
-    p.add_argument("--no-figures", action="store_true", help="skip the figures")
-    p.add_argument("--nuts-check", action="store_true",
-                   help="with --inference svi: also run NUTS on the same model and report "
-                   "whether SVI's 90%% intervals match NUTS's (summary.json 'nuts_check')")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.add_argument("--ci", type=float, default=0.9,
-                   help="probability mass of the printed and saved intervals and of the "
-                   "figures' outer band (default 0.9; the convergence checks stay at 90%%)")
-    p.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
-                   help="posterior: NUTS (default) or SVI with a full-rank Gaussian guide")
-    p.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
-                   help="half-normal scale of the model error away from the recordings, in "
-                   "log orbit size (default: per posterior draw 0.1, or 0.7 where the fit's "
-                   "relative model error is above 2%%; none with --discrepancy): it widens "
-                   "new measurements' bands between and beyond the recordings only")
-    p.add_argument("--discrepancy", action="store_true",
-                   help="fit with the model discrepancy, a Gaussian process over the diagram "
-                   "on the orbits' fundamental whose scale is sampled with the Hopf point and "
-                   "the fold (docs/model_discrepancy.md; not yet the default)")
-    p.add_argument("--mu-discrepancy", type=float, default=None, metavar="K",
-                   help="with --discrepancy: κ of its twin in μ, which moves the Hopf point "
-                   "and the fold by the model's error beyond the recordings (default 2; 0 "
-                   "reports the normal form's own points)")
-    p.add_argument("--nn-width", default=None, metavar="H",
-                   help="hidden units of the map's network (default 16), or 'inf' for its "
-                   "limit of infinite width, a Gaussian process with the network's kernel "
-                   "that has no hidden layer to draw (docs/model.md)")
-    p.add_argument("--json", action="store_true",
-                   help="print the results as JSON (schema of bayeshopf.cli._schema) instead "
-                   "of the table")
+@dataclass(frozen=True)
+class FitGroups:
+    """The sections of ``fit``'s and ``demo``'s ``--help``, each an argument group."""
+
+    model: argparse._ArgumentGroup
+    inference: argparse._ArgumentGroup
+    outputs: argparse._ArgumentGroup
+
+
+def fit_groups(p: argparse.ArgumentParser) -> FitGroups:
+    """``p``'s sections model, inference and outputs, in that order."""
+    return FitGroups(
+        model=p.add_argument_group("model", "the normal form, its map and its model error"),
+        inference=p.add_argument_group("inference", "how the posterior is computed and checked"),
+        outputs=p.add_argument_group("outputs", "the output folder and what is printed"))
+
+
+def add_fit_options(g: FitGroups) -> None:
+    """The options ``fit`` and ``demo`` share, each in its section."""
+    g.inference.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
+                             help="posterior: NUTS (default) or SVI with a full-rank Gaussian "
+                             "guide")
+    g.inference.add_argument("--nuts-check", action="store_true",
+                             help="with --inference svi: also run NUTS on the same model and "
+                             "report whether SVI's 90%% intervals match NUTS's (summary.json "
+                             "'nuts_check')")
+    g.inference.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    g.inference.add_argument("--fast", action="store_true",
+                             help="short optimisation runs (smoke tests, CI); intervals less "
+                             "converged")
+
+    g.model.add_argument("--nn-width", default=None, metavar="H",
+                         help="hidden units of the map's network (default 16), or 'inf' for "
+                         "its limit of infinite width, a Gaussian process with the network's "
+                         "kernel that has no hidden layer to draw (docs/model.md)")
+    g.model.add_argument("--discrepancy", action="store_true",
+                         help="fit with the model discrepancy, a Gaussian process over the "
+                         "diagram on the orbits' fundamental whose scale is sampled with the "
+                         "Hopf point and the fold (docs/model_discrepancy.md; not yet the "
+                         "default)")
+    g.model.add_argument("--mu-discrepancy", type=float, default=None, metavar="K",
+                         help="with --discrepancy: κ of its twin in μ, which moves the Hopf "
+                         "point and the fold by the model's error beyond the recordings "
+                         "(default 2; 0 reports the normal form's own points)")
+    g.model.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
+                         help="half-normal scale of the model error away from the recordings, "
+                         "in log orbit size (default: per posterior draw 0.1, or 0.7 where "
+                         "the fit's relative model error is above 2%%; none with "
+                         "--discrepancy): it widens new measurements' bands between and "
+                         "beyond the recordings only")
+
+    g.outputs.add_argument("--force", action="store_true",
+                           help="write into a non-empty output folder (replaces bayeshopf's "
+                           "files only)")
+    g.outputs.add_argument("--ci", type=float, default=0.9,
+                           help="probability mass of the printed and saved intervals and of "
+                           "the figures' outer band (default 0.9; the convergence checks stay "
+                           "at 90%%)")
+    g.outputs.add_argument("--no-figures", action="store_true", help="skip the figures")
+    g.outputs.add_argument("--json", action="store_true",
+                           help="print the results as JSON (schema of bayeshopf.cli._schema) "
+                           "instead of the table")
+    g.outputs.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
 def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:

@@ -1,4 +1,4 @@
-"""Options several commands share, defined once: the fit folder, ``--recordings``, ``--ci``."""
+"""Options several commands share, defined once: fit folder, recordings, CI, figure format."""
 
 from __future__ import annotations
 
@@ -21,3 +21,9 @@ def add_ci(p: argparse.ArgumentParser, of: str = "the bands and intervals") -> N
     """``--ci``: the probability mass of ``of`` (default 0.9)."""
     p.add_argument("--ci", type=float, default=0.9,
                    help=f"probability mass of {of} (default 0.9)")
+
+
+def add_format(p: argparse.ArgumentParser, of: str = "figure") -> None:
+    """``--format``: the file format of the figures (png, pdf or svg; default png)."""
+    p.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
+                   help=f"{of} format (default png; pdf and svg are vector)")

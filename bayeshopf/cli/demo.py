@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from bayeshopf.cli._hybrid import add_fit_options, run_hybrid
+from bayeshopf.cli._hybrid import add_fit_options, fit_groups, run_hybrid
 from bayeshopf.cli._schema import dumps
 from bayeshopf.cli._summary import print_table, summary_json
 from bayeshopf.simulators.truth import flutter_experiment
@@ -25,8 +25,10 @@ DESCRIPTION = ("Simulate stable and unstable LCO recordings of the paper's 3-DOF
 
 def add_arguments(d: argparse.ArgumentParser) -> None:
     """The options of ``demo``."""
-    d.add_argument("--out", default="bayeshopf-demo", help="output folder (default bayeshopf-demo)")
-    add_fit_options(d)
+    groups = fit_groups(d)
+    groups.outputs.add_argument("--out", default="bayeshopf-demo",
+                                help="output folder (default bayeshopf-demo)")
+    add_fit_options(groups)
 
 
 def run(args) -> int:

@@ -15,7 +15,7 @@ from bayeshopf import fit_folder
 from bayeshopf._format import format_interval, format_number
 from bayeshopf.cli import _schema
 from bayeshopf.cli._checks import check_ci, check_share
-from bayeshopf.cli._options import add_ci, add_fit_dir
+from bayeshopf.cli._options import add_ci, add_fit_dir, add_format
 from bayeshopf.design import Candidate, DesignResult, next_measurements, parse_candidates
 from bayeshopf.errors import DataError, FitError
 
@@ -27,33 +27,38 @@ DESCRIPTION = ("From a folder written by 'bayeshopf fit' (no refit), rank candid
 
 
 def add_arguments(s: argparse.ArgumentParser) -> None:
-    """The options of ``next``."""
+    """The options of ``next``, in the sections of its ``--help``."""
     add_fit_dir(s)
     s.add_argument("--target", choices=("fold", "hopf", "diagram"), default="fold",
                    help="what to learn: the fold (default), the Hopf point, or the diagram")
-    s.add_argument("--candidates", default=None, metavar="MU_MIN:MU_MAX:STEP",
-                   help="candidate μ grid (default: 41 points from the fold's band to beyond "
-                   "the data)")
-    s.add_argument("--branch", choices=("stable", "unstable", "both"), default="both")
-    s.add_argument("--n", type=int, default=3, help="how many to recommend (default 3)")
-    add_ci(s, "the intervals")
     s.add_argument("--seed", type=int, default=0, help="seed of the simulated measurements")
-    s.add_argument("--min-p-exists", type=float, default=0.9, metavar="P",
-                   help="never recommend where the branch exists in fewer than this share of "
-                   "posterior draws (default 0.9); such candidates are listed as skipped")
-    s.add_argument("--min-amplitude", type=float, default=0.0, metavar="A",
-                   help="never recommend where the predicted amplitude (peak-to-peak, in the "
-                   "fit's amplitude unit) is below A (default 0: no limit)")
-    s.add_argument("--resolution", type=float, default=0.0, metavar="DMU",
-                   help="resolution in μ (the fit's μ unit): candidates closer than DMU merge "
-                   "(the best is kept) and a fold or Hopf gain below DMU is flagged as below "
-                   "the tunnel's resolution (default 0: none)")
-    s.add_argument("--json", action="store_true",
-                   help="print the whole result as JSON (schema of bayeshopf.cli._schema)")
-    s.add_argument("--all", action="store_true", help="print every candidate, not only the best")
-    s.add_argument("--no-figure", action="store_true", help="skip the figure")
-    s.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
-                   help="figure format (default png)")
+
+    where = s.add_argument_group("candidates", "where a measurement may be made, and where not")
+    where.add_argument("--candidates", default=None, metavar="MU_MIN:MU_MAX:STEP",
+                       help="candidate μ grid (default: 41 points from the fold's band to "
+                       "beyond the data)")
+    where.add_argument("--branch", choices=("stable", "unstable", "both"), default="both")
+    where.add_argument("--min-p-exists", type=float, default=0.9, metavar="P",
+                       help="never recommend where the branch exists in fewer than this share "
+                       "of posterior draws (default 0.9); such candidates are listed as "
+                       "skipped")
+    where.add_argument("--min-amplitude", type=float, default=0.0, metavar="A",
+                       help="never recommend where the predicted amplitude (peak-to-peak, in "
+                       "the fit's amplitude unit) is below A (default 0: no limit)")
+    where.add_argument("--resolution", type=float, default=0.0, metavar="DMU",
+                       help="resolution in μ (the fit's μ unit): candidates closer than DMU "
+                       "merge (the best is kept) and a fold or Hopf gain below DMU is flagged "
+                       "as below the tunnel's resolution (default 0: none)")
+
+    shown = s.add_argument_group("outputs", "what is printed and drawn")
+    shown.add_argument("--n", type=int, default=3, help="how many to recommend (default 3)")
+    shown.add_argument("--all", action="store_true",
+                       help="print every candidate, not only the best")
+    add_ci(shown, "the intervals")
+    shown.add_argument("--json", action="store_true",
+                       help="print the whole result as JSON (schema of bayeshopf.cli._schema)")
+    shown.add_argument("--no-figure", action="store_true", help="skip the figure")
+    add_format(shown)
 
 
 def run(args) -> int:

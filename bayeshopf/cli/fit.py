@@ -6,7 +6,7 @@ import argparse
 import sys
 from dataclasses import replace
 
-from bayeshopf.cli._hybrid import add_fit_options, run_hybrid
+from bayeshopf.cli._hybrid import add_fit_options, fit_groups, run_hybrid
 from bayeshopf.cli._schema import dumps
 from bayeshopf.cli._summary import print_table, summary_json
 from bayeshopf.cli.download import DATASETS
@@ -25,32 +25,25 @@ CRITICALITY = {"sub": "subcritical", "super": "supercritical", "auto": "auto"}
 
 
 def add_arguments(f: argparse.ArgumentParser) -> None:
-    """The options of ``fit``."""
-    f.add_argument("data", nargs="?", default=None,
-                   help="folder of .mat files, or interchange folder (or use --dataset)")
-    f.add_argument("--dataset", choices=DATASETS, default=None,
-                   help="a published data set instead of DATA: flutter_cbc, the wind-tunnel "
-                   "rig's 7 CBC recordings ($BAYESHOPF_FLUTTER_CBC if set, else downloaded "
-                   "once, 11 MB, SHA-256 checked)")
-    f.add_argument("--out", required=True, help="output folder (refused if not empty)")
-    f.add_argument("--criticality", choices=tuple(CRITICALITY), default="sub",
-                   help="normal form: subcritical (default), supercritical, or auto "
-                   "(decided from the data)")
-    f.add_argument("--exact-loo", action="store_true",
-                   help="with --criticality auto: refit each model without every recording "
-                   "whose PSIS Pareto k exceeds 0.7 and use its exact leave-one-out density "
-                   "(one fit per refit)")
-    f.add_argument("--leave-one-out", action="store_true",
-                   help="also refit without each recording in turn and predict it (one fit "
-                   "per recording): summary.json's leave_one_out and a warning when too few "
-                   "held-out amplitudes lie inside their 90%% predictive bands")
-    f.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
-                   help="channels of the planar pair (default: the first two)")
-    f.add_argument("--rig", metavar="FILE", default=None,
-                   help="rig description (TOML or JSON) of DATA's .mat files: rows, scales, "
-                   "time, mu, what a sensor writes without a reading (default: DATA/rig.toml "
-                   "if present, else the built-in flutter_cbc rig)")
-    ctl = f.add_mutually_exclusive_group()
+    """The options of ``fit``, in the sections of its ``--help``."""
+    data = f.add_argument_group("data", "what is fitted: a folder DATA or --dataset")
+    data.add_argument("data", nargs="?", default=None,
+                      help="folder of .mat files, or interchange folder (or use --dataset)")
+    data.add_argument("--dataset", choices=DATASETS, default=None,
+                      help="a published data set instead of DATA: flutter_cbc, the wind-tunnel "
+                      "rig's 7 CBC recordings ($BAYESHOPF_FLUTTER_CBC if set, else downloaded "
+                      "once, 11 MB, SHA-256 checked)")
+    data.add_argument("--rig", metavar="FILE", default=None,
+                      help="rig description (TOML or JSON) of DATA's .mat files: rows, scales, "
+                      "time, mu, what a sensor writes without a reading (default: "
+                      "DATA/rig.toml if present, else the built-in flutter_cbc rig)")
+    data.add_argument("--planar", nargs=2, metavar=("Z1", "Z2"), default=None,
+                      help="channels of the planar pair (default: the first two)")
+    data.add_argument("--keep-unconverged", action="store_true",
+                      help="keep the CBC recordings on which the controller did not converge "
+                      "(where the rig description names the convergence fields; left out by "
+                      "default: such a recording is not an orbit of the uncontrolled system)")
+    ctl = data.add_mutually_exclusive_group()
     ctl.add_argument("--control", metavar="CHANNEL", default=None,
                      help="the channel holding the CBC controller's output (actuator command): "
                      "its residual fundamental becomes a measured input of the model (default: "
@@ -59,11 +52,23 @@ def add_arguments(f: argparse.ArgumentParser) -> None:
                      help="leave out the orbits' response to the CBC controller's residual "
                      "fundamental (in the model by default where the rig description names a "
                      "control channel, as the built-in flutter_cbc rig does)")
-    f.add_argument("--keep-unconverged", action="store_true",
-                   help="keep the CBC recordings on which the controller did not converge "
-                   "(where the rig description names the convergence fields; left out by "
-                   "default: such a recording is not an orbit of the uncontrolled system)")
-    add_fit_options(f)
+
+    groups = fit_groups(f)
+    groups.model.add_argument("--criticality", choices=tuple(CRITICALITY), default="sub",
+                              help="normal form: subcritical (default), supercritical, or "
+                              "auto (decided from the data)")
+    groups.model.add_argument("--exact-loo", action="store_true",
+                              help="with --criticality auto: refit each model without every "
+                              "recording whose PSIS Pareto k exceeds 0.7 and use its exact "
+                              "leave-one-out density (one fit per refit)")
+    groups.inference.add_argument("--leave-one-out", action="store_true",
+                                  help="also refit without each recording in turn and predict "
+                                  "it (one fit per recording): summary.json's leave_one_out "
+                                  "and a warning when too few held-out amplitudes lie inside "
+                                  "their 90%% predictive bands")
+    groups.outputs.add_argument("--out", required=True,
+                                help="output folder (refused if not empty)")
+    add_fit_options(groups)
 
 
 def recordings(args):

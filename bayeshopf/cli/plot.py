@@ -6,7 +6,7 @@ import argparse
 
 from bayeshopf import fit_folder
 from bayeshopf.cli._checks import check_ci
-from bayeshopf.cli._options import add_ci, add_fit_dir, add_recordings
+from bayeshopf.cli._options import add_ci, add_fit_dir, add_format, add_recordings
 from bayeshopf.errors import DataError
 from bayeshopf.plotting._units import LENGTHS
 
@@ -19,8 +19,7 @@ DESCRIPTION = ("Draw the figures of a folder written by 'bayeshopf fit' or 'baye
 def add_arguments(pl: argparse.ArgumentParser) -> None:
     """The options of ``plot``."""
     add_fit_dir(pl)
-    pl.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
-                    help="file format (default png; pdf and svg are vector)")
+    add_format(pl, "file")
     add_recordings(pl, "the phase portraits and time series")
     add_ci(pl)
     pl.add_argument("--length-unit", default="auto",
