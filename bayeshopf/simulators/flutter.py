@@ -134,17 +134,19 @@ _WHY_LAG = "Jones' lag fitted to thin-aerofoil theory; real sections differ (±3
 #: a static load test resolves), 2% for the lift slope and the pitch spring's
 #: hardening, 3% for the damping, the lag coefficients and the spring's even term.
 FLUTTER_UNCERTAIN: tuple[UncertainParameter, ...] = (
-    UncertainParameter("k_h", "lognormal", 0.10, _WHY_K, tolerance=0.01),
-    UncertainParameter("k_alpha", "lognormal", 0.10, _WHY_K, tolerance=0.01),
-    UncertainParameter("c_h", "lognormal", 0.30, _WHY_D, tolerance=0.03),
-    UncertainParameter("c_alpha", "lognormal", 0.30, _WHY_D, tolerance=0.03),
+    # springs
+    *(UncertainParameter(k, "lognormal", 0.10, _WHY_K, tolerance=0.01)
+      for k in ("k_h", "k_alpha")),
+    # damping
+    *(UncertainParameter(c, "lognormal", 0.30, _WHY_D, tolerance=0.03)
+      for c in ("c_h", "c_alpha")),
+    # aerodynamics: the lift slope, then the lag coefficients
     UncertainParameter("c0", "lognormal", 0.10,
                        "steady lift-curve slope 2π·c0; real sections at Re ~ 1e5: 0.85–1.0 "
                        "(±10%)", tolerance=0.02),
-    UncertainParameter("c1", "lognormal", 0.30, _WHY_LAG, tolerance=0.03),
-    UncertainParameter("c2", "lognormal", 0.30, _WHY_LAG, tolerance=0.03),
-    UncertainParameter("c3", "lognormal", 0.30, _WHY_LAG, tolerance=0.03),
-    UncertainParameter("c4", "lognormal", 0.30, _WHY_LAG, tolerance=0.03),
+    *(UncertainParameter(c, "lognormal", 0.30, _WHY_LAG, tolerance=0.03)
+      for c in ("c1", "c2", "c3", "c4")),
+    # the pitch spring's nonlinearity
     UncertainParameter("k_alpha2", "normal", 0.30,
                        "even part of the fitted moment-angle curve, its least certain term "
                        "(±30%)", tolerance=0.03),
