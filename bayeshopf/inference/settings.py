@@ -107,12 +107,16 @@ class CollapsedSettings:
             own points.
     """
 
+    # features
     n_harmonics: int = 4
     segment_periods: float = 5.0
+    # the map's network
     nn_width: int | None = 16
     nn_mu_scale: float | None = 1.0
     nn_seed: int = 0
+    # the normal form's unfolding
     unfolding: str = "curved"
+    # inference, and NUTS
     inference: str = "nuts"
     num_chains: int = 4
     num_warmup: int = 500
@@ -122,13 +126,16 @@ class CollapsedSettings:
     dense_mass: bool = True
     target_accept: float = 0.8
     max_tree_depth: int = 10
+    # SVI and the MAP
     svi_steps: int = 3000
     n_svi_draws: int = 2000
     lbfgs_steps: int = 300
+    # parts of the model
     frequency: bool = True
     extrapolation: bool = True
     control: bool = True
     extrapolation_scale: float | None = None
+    # the model discrepancy
     discrepancy: bool = False
     discrepancy_floor: float = dm.FLOOR
     mu_discrepancy: float = MU_DISCREPANCY
