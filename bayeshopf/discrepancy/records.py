@@ -4,9 +4,10 @@ r"""Typed records of the calibration: parameters' posteriors, fits, the report.
 :class:`CalibrationReport`; its parts are the calibration with no term
 (:class:`Calibration`), each term fitted jointly with the uncertain
 parameters (:class:`CalibratedTermFit`), pairs of terms
-(:class:`CalibratedPairFit`), the posterior of one uncertain parameter in
-physical units (:class:`ParameterPosterior`) and that of the relative model
-error τ under one model (:class:`ModelError`).
+(:class:`CalibratedPairFit`; what the two share: :class:`LinearisedFit`), the
+posterior of one uncertain parameter in physical units
+(:class:`ParameterPosterior`) and that of the relative model error τ under one
+model (:class:`ModelError`).
 
 **Parameters' posterior.** :math:`z \sim \mathcal N(\hat z, H^{-1})`; each
 parameter's median is :math:`\theta(\hat z_j)` and its 90% interval
@@ -37,7 +38,8 @@ from bayeshopf.simulators.base import UncertainParameter
 __all__ = ["KIND_NONE", "KIND_PARAMS", "KIND_TERM", "KIND_UNEXPLAINED", "OFF_LEVEL", "Z90",
            "Unexplained",
            "CalibratedPairFit", "CalibratedTermFit", "Calibration", "CalibrationError",
-           "CalibrationReport", "ModelError", "ParameterPosterior", "off_threshold",
+           "CalibrationReport", "LinearisedFit", "ModelError", "ParameterPosterior",
+           "off_threshold",
            "posteriors"]
 
 #: Standard normal quantile of a two-sided 90% interval.
@@ -196,8 +198,43 @@ class Calibration:
         return {p.name: p.median for p in self.parameters}
 
 
+@dataclass(frozen=True, kw_only=True)
+class LinearisedFit:
+    """What a term's and a pair's joint fit share: where it was linearised, its evidence.
+
+    The fields are keyword-only (after the fits' own fields in their
+    constructors); :func:`~bayeshopf.discrepancy.calibration.calibrate`'s charge,
+    refits and Savage–Dickey comparison read them of either kind of fit.
+
+    Attributes:
+        orbits: The simulator's orbits at the joint mode (at the calibration's
+            mode with the terms' coefficients 0 when only screened).
+        x: The point ``(z, ζ)`` the linearisation is about.
+        fitter: The residuals (their whitening) of this fit.
+        penalty: Nats charged to ``log_z`` for the linearisation's disagreement
+            with the orbits re-shot at its mode
+            (:func:`~bayeshopf.discrepancy.problem.charge`; screened and refined
+            fits alike).
+        log_z_laplace: The model's own Laplace evidence at its own end point
+            (charge paid); ``log_z`` is the one compared, Savage–Dickey against
+            the nested model where :func:`~bayeshopf.discrepancy.nested.nested_log_z`
+            uses it (``evidence`` says which).
+        coefficients: The Laplace marginal of the term coefficients at every τ
+            (:class:`~bayeshopf.discrepancy.nested.CoefficientPosterior`).
+        evidence: ``"laplace"`` or ``"savage-dickey vs <nested model>"``.
+    """
+
+    orbits: OrbitBatch | None = field(default=None, repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+    fitter: Fitter | None = field(default=None, repr=False)
+    penalty: float = 0.0
+    log_z_laplace: float | None = None
+    coefficients: CoefficientPosterior | None = field(default=None, repr=False)
+    evidence: str = "laplace"
+
+
 @dataclass(frozen=True)
-class CalibratedTermFit:
+class CalibratedTermFit(LinearisedFit):
     r"""One term fitted jointly with the uncertain parameters (:math:`M_k`).
 
     Attributes:
@@ -221,26 +258,14 @@ class CalibratedTermFit:
             (:func:`~bayeshopf.discrepancy.fitting.fit_term`) or only screened by the
             linear model at the calibration
             (:func:`~bayeshopf.discrepancy.fitting.screen_term`).
-        orbits: The simulator's orbits at the joint mode (at the calibration's
-            mode with the term's coefficient 0 when only screened).
         model_error: Posterior of the relative model error τ under this model.
         column: When screened: the data rows of the term's Jacobian column at
             the calibration (:func:`~bayeshopf.discrepancy.fitting.screen_pair` reuses
             it).
-        x: The point ``(z, ζ)`` the linearisation is about.
-        jac: The data rows of the Jacobian there, shape ``(R·P, d + 1)``.
-        fitter: The residuals (their whitening) of this fit.
-        penalty: Nats charged to ``log_z`` for the linearisation's disagreement
-            with the orbits re-shot at its mode
-            (:func:`~bayeshopf.discrepancy.problem.charge`; screened and refined
-            fits alike).
-        log_z_laplace: The model's own Laplace evidence at its own end point
-            (charge paid); ``log_z`` is the one compared, Savage–Dickey against
-            the nested model where :func:`~bayeshopf.discrepancy.nested.nested_log_z`
-            uses it (``evidence`` says which).
-        coefficients: The Laplace marginal of the term coefficients at every τ
-            (:class:`~bayeshopf.discrepancy.nested.CoefficientPosterior`).
-        evidence: ``"laplace"`` or ``"savage-dickey vs <nested model>"``.
+        jac: The data rows of the Jacobian at ``x``, shape ``(R·P, d + 1)``.
+
+    And :class:`LinearisedFit`'s ``orbits``, ``x``, ``fitter``, ``penalty``,
+    ``log_z_laplace``, ``coefficients`` and ``evidence``.
     """
 
     term: Term
@@ -257,16 +282,9 @@ class CalibratedTermFit:
     lost: tuple[int, ...] = ()
     status: int = 0
     refined: bool = True
-    orbits: OrbitBatch | None = field(default=None, repr=False)
     model_error: ModelError | None = None
     column: np.ndarray | None = field(default=None, repr=False)
-    x: np.ndarray | None = field(default=None, repr=False)
     jac: np.ndarray | None = field(default=None, repr=False)
-    fitter: Fitter | None = field(default=None, repr=False)
-    penalty: float = 0.0
-    log_z_laplace: float | None = None
-    coefficients: CoefficientPosterior | None = field(default=None, repr=False)
-    evidence: str = "laplace"
 
 
 @dataclass(frozen=True)
@@ -418,7 +436,7 @@ class ModelError:
 
 
 @dataclass(frozen=True)
-class CalibratedPairFit:
+class CalibratedPairFit(LinearisedFit):
     """Two terms fitted jointly with the uncertain parameters.
 
     Attributes:
@@ -435,15 +453,11 @@ class CalibratedPairFit:
             the data see only their combination).
         parameters: The uncertain parameters' posterior with the pair.
         model_error: Posterior of τ under this model.
-        orbits: The orbits at the joint mode (the calibration's when screened).
-        lost: Recordings whose orbit is lost there.
+        lost: Recordings whose orbit is lost at the joint mode.
         refined: Whether fitted in full or only screened.
-        x: The point the linearisation is about.
-        fitter: The residuals (their whitening) of this fit.
-        penalty: As :attr:`CalibratedTermFit.penalty`.
-        log_z_laplace: As :attr:`CalibratedTermFit.log_z_laplace`.
-        coefficients: As :attr:`CalibratedTermFit.coefficients` (both terms).
-        evidence: As :attr:`CalibratedTermFit.evidence`.
+
+    And :class:`LinearisedFit`'s ``orbits``, ``x``, ``fitter``, ``penalty``,
+    ``log_z_laplace``, ``coefficients`` (both terms') and ``evidence``.
     """
 
     terms: tuple[Term, Term]
@@ -455,15 +469,8 @@ class CalibratedPairFit:
     correlation: float
     parameters: tuple[ParameterPosterior, ...]
     model_error: ModelError
-    orbits: OrbitBatch | None = field(default=None, repr=False)
     lost: tuple[int, ...] = ()
     refined: bool = False
-    x: np.ndarray | None = field(default=None, repr=False)
-    fitter: Fitter | None = field(default=None, repr=False)
-    penalty: float = 0.0
-    log_z_laplace: float | None = None
-    coefficients: CoefficientPosterior | None = field(default=None, repr=False)
-    evidence: str = "laplace"
 
     @property
     def name(self) -> str:
