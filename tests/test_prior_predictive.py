@@ -49,6 +49,17 @@ def test_the_normal_form_follows_its_prior(draws):
     assert stats.ks_2samp([d.theta["mu0"] for d in ds], mu0).pvalue > 1e-3
 
 
+def test_the_model_errors_follow_their_priors(draws):
+    # σ_rel is sampled as S|z| with the discrepancy (a smooth geometry for NUTS near
+    # 0): its draws must still be HalfNormal(S), as η's are HalfNormal(ETA_PRIOR)
+    from bayeshopf.model import discrepancy as dm
+
+    _, _, _, ds = draws
+    for name, scale in (("sigma_rel", cm.SIGMA_REL_PRIOR), ("eta", dm.ETA_PRIOR)):
+        x = np.array([float(d.theta[name]) for d in ds])
+        assert stats.kstest(x, stats.halfnorm(scale=scale).cdf).pvalue > 1e-3, name
+
+
 def test_coefficients_follow_the_collapsed_marginal(draws):
     # each axis's coefficients, flattened as the likelihood flattens them, have
     # the Mahalanobis distance of a Gaussian under the covariance Φ V Φᵀ + D the

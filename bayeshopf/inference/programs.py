@@ -46,6 +46,7 @@ def _initial_values(spec: cm.CollapsedSpec) -> dict:
     if spec.omega_centre is not None:
         v["sigma_omega"] = 0.5 * cm.SIGMA_OMEGA_PRIOR * spec.omega_centre
     if spec.has_discrepancy:
+        v["sigma_rel_z"] = v.pop("sigma_rel") / cm.SIGMA_REL_PRIOR   # σ_rel = S|z|
         v["eta"] = 0.5 * dm.ETA_PRIOR
         v["ell"] = dm.LENGTH_PRIOR[0]
     if spec.samples_nu_mu:

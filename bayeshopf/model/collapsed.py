@@ -379,7 +379,7 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
             "tau_shape", dist.LogNormal(np.log(TAU_SHAPE_PRIOR[0]), TAU_SHAPE_PRIOR[1])),
          "sigma": numpyro.sample(
             "sigma", dist.HalfNormal(SIGMA_PRIOR * spec.orbit_scale).expand([2]).to_event(1)),
-         "sigma_rel": numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))}
+         "sigma_rel": _relative_error(spec)}
     if spec.has_discrepancy:
         h["eta"] = numpyro.sample("eta", dist.HalfNormal(dm.ETA_PRIOR))
         h["ell"] = numpyro.sample("ell", dist.LogNormal(np.log(dm.LENGTH_PRIOR[0]),
@@ -388,6 +388,22 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
         h["nu_mu"] = numpyro.sample("nu_mu", dist.LogNormal(np.log(nk.NU_PRIOR[0]),
                                                             nk.NU_PRIOR[1]))
     return h
+
+
+def _relative_error(spec: CollapsedSpec):
+    """``σ_rel ~ HalfNormal(SIGMA_REL_PRIOR)``, a site; with the discrepancy as ``S|z|``.
+
+    With the discrepancy the data say little about ``σ_rel`` beside ``η``, and
+    its posterior reaches down to 0: in ``log σ_rel`` (NumPyro's unconstrained
+    space) that is a long tail that shrinks NUTS's steps. Only ``σ_rel²``
+    enters the likelihood, so ``σ_rel = S|z|`` with ``z ~ N(0, 1)``
+    (``sigma_rel_z``) has the same prior and posterior and is smooth through
+    0; ``sigma_rel`` is then a deterministic site.
+    """
+    if not spec.has_discrepancy:
+        return numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))
+    z = numpyro.sample("sigma_rel_z", dist.Normal(0.0, 1.0))
+    return numpyro.deterministic("sigma_rel", SIGMA_REL_PRIOR * jnp.abs(z))
 
 
 def frequency_site(spec: CollapsedSpec):

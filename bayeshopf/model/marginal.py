@@ -88,10 +88,11 @@ def log_marginal(Phi, y, d, sd):
         \frac{∂ℓ}{∂y} = −α,
 
     from ``∂ℓ/∂Σ = ½(ααᵀ − Σ⁻¹)``, with ``Σ⁻¹Φ' = D⁻¹Φ'A⁻¹ = D^{-1/2}Σ̃⁻¹P``.
-    One Cholesky factor and triangular solves with it give them all (never
-    ``A⁻¹`` itself, which small measurement errors make ill-conditioned), and
-    NUTS runs faster with them than with reverse mode through the
-    factorisation. Second derivatives (the Laplace covariance) still work, as
+    One Cholesky factor and its triangle's inverse give them all (the value
+    through its own triangular solve, never through ``A⁻¹``: small measurement
+    errors make ``A`` ill-conditioned, and ``yᵀD⁻¹y − bᵀA⁻¹b`` a difference of
+    large numbers), and NUTS runs faster with them than with reverse mode
+    through the factorisation. Second derivatives (the Laplace covariance) still work, as
     the rule is made of differentiable operations. ``tests/test_collapsed.py``
     checks value, gradient and Hessian against the dense Gaussian, and value
     and gradient against reverse mode on an ill-conditioned design, in both forms.
@@ -100,26 +101,33 @@ def log_marginal(Phi, y, d, sd):
 
 
 def _woodbury_moments(Phi, y, d, sd):
-    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``A``."""
-    solve = jax.scipy.linalg.solve_triangular
-    # triangular solves throughout, never A⁻¹ itself: with small measured errors A is
-    # ill-conditioned, and an explicit inverse puts visible error into the log density
+    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``A``, with ``A⁻¹ = L⁻ᵀL⁻¹``.
+
+    One triangular solve (``L⁻¹``), the rest products with it; ``A⁻¹``'s
+    eigenvalues are at most 1, so the product does not amplify rounding, and
+    the value keeps its own solve (:func:`_factored`).
+    """
     value, L, z, PD, Dinv = _factored(Phi, y, d, sd)
-    m = solve(L.T, z, lower=False)                  # A⁻¹b
+    Li = jax.scipy.linalg.solve_triangular(L, jnp.eye(L.shape[0]), lower=True)
+    m = Li.T @ z                                    # A⁻¹b
     alpha = Dinv * y - PD @ m
-    C = solve(L, PD.T, lower=True)                  # L⁻¹Φ'ᵀD⁻¹, (J, n)
-    B = solve(L.T, C, lower=False).T                # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
+    C = Li @ PD.T                                   # L⁻¹Φ'ᵀD⁻¹, (J, n)
+    B = C.T @ Li                                    # D⁻¹Φ'A⁻¹ = Σ⁻¹Φ', (n, J)
     return value, alpha, m, B, Dinv - jnp.sum(C * C, axis=0)
 
 
 def _dual_moments(Phi, y, d, sd):
-    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``Σ̃``: ``(Σ⁻¹)_{ii} = |(L⁻¹)_{:,i}|²/d_i``."""
-    solve = jax.scipy.linalg.solve_triangular
+    """``(value, α, m, Σ⁻¹Φ', diag Σ⁻¹)`` through ``Σ̃``, with ``Σ̃⁻¹ = L⁻ᵀL⁻¹``.
+
+    ``Σ⁻¹ = D^{-1/2} Σ̃⁻¹ D^{-1/2}``; one triangular solve (``L⁻¹``), the rest
+    products with it (``Σ̃⁻¹``'s eigenvalues are at most 1).
+    """
     value, L, u, P, r = _factored_dual(Phi, y, d, sd)
-    alpha = r * solve(L.T, u, lower=False)                                # Σ⁻¹y
-    B = r[:, None] * solve(L.T, solve(L, P, lower=True), lower=False)    # Σ⁻¹Φ', (n, J)
-    Li = solve(L, jnp.eye(L.shape[0]), lower=True)                        # L⁻¹
-    return value, alpha, (Phi * sd).T @ alpha, B, r * r * jnp.sum(Li * Li, axis=0)
+    Li = jax.scipy.linalg.solve_triangular(L, jnp.eye(L.shape[0]), lower=True)   # L⁻¹
+    S = Li.T @ Li                                                                # Σ̃⁻¹
+    alpha = r * (Li.T @ u)                                                       # Σ⁻¹y
+    B = r[:, None] * (S @ P)                                                     # Σ⁻¹Φ', (n, J)
+    return value, alpha, (Phi * sd).T @ alpha, B, r * r * jnp.diag(S)
 
 
 @log_marginal.defjvp
