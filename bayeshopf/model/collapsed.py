@@ -31,14 +31,13 @@ group (module constants below): ``ρ`` (the orbit scale in the frame) times
 ``τ_μ^p`` for a term of power ``p`` in μ̃ and ``τ_s`` for the shape terms
 (network and polynomial). ``τ_μ`` and ``τ_s`` are hyperparameters with
 log-normal priors, integrated over with the rest: how much the map may change
-with μ trades against μ0, and the
-posterior must carry that. The hidden layer ``(W_1, b_1)`` is a fixed draw from
-its unit-normal prior (random features), so the network's prior is kept and its
-output layer integrated exactly; or (``spec.nn_training`` set) the network is its
-limit of infinite width, a Gaussian process with the network's kernel whose
-coefficients at the training orbits are latent linear columns
-(:mod:`bayeshopf.model.network_kernel`), so no draw of a hidden layer decides
-anything.
+with μ trades against μ0, and the posterior must carry that. The hidden layer
+``(W_1, b_1)`` is a fixed draw from its unit-normal prior (random features), so
+the network's prior is kept and its output layer integrated exactly; or
+(``spec.nn_training`` set) the network is its limit of infinite width, a
+Gaussian process with the network's kernel whose coefficients at the training
+orbits are latent linear columns (:mod:`bayeshopf.model.network_kernel`), so no
+draw of a hidden layer decides anything.
 
 **Likelihood.** ``y_{i,c} ~ N(Φ_i β_c, diag(se_{i,c}^2 + σ_c^2 + σ_rel^2 y_{i,c}^2))``,
 with ``se`` the measured standard errors, ``σ_c ~ HalfNormal(0.02 ρ)`` one
@@ -57,25 +56,17 @@ The posterior of ``θ`` is sampled; ``β`` is drawn exactly given each draw of `
 coefficients ``γ``, integrated out by the same marginal.
 
 **Control** (recordings held by control-based continuation, when the rig
-records the controller's output). CBC holds an orbit with a feedback force
-whose search nulls one scalar measure of its fundamental (a one-dimensional
-search over the target amplitude), not the fundamental itself: what is left is
-measured, as the fundamental ``U_i = u_{a,i} − i u_{b,i}`` of the control
-channel on the features' time origin. To first order it moves the orbit's
-shape relative to the first frame axis ``w1`` (the channel ``z1`` scaled,
-whose crest is the time origin and whose size CBC's target sets): the second
-axis's fundamental ``a_{2,1} − i b_{2,1}`` gains ``H U_i`` with a complex
-gain ``H = h_r + i h_i``,
+records the controller's output; ``docs/model.md``). What CBC's search leaves
+of the control's fundamental, ``U_i = u_{a,i} − i u_{b,i}`` on the features'
+time origin, is measured; to first order it moves the second frame axis's
+fundamental ``a_{2,1} − i b_{2,1}`` by ``H U_i``, ``H = h_r + i h_i``,
 
 .. math::  Δa_{2,1} = h_r u_a + h_i u_b,\qquad Δb_{2,1} = h_r u_b − h_i u_a,
 
 two more columns of ``Φ_i`` for ``w2`` (:func:`control_columns`; zero for
-``w1``), linear in ``h`` and integrated out with the map:
-``h_r, h_i ~ N(0, (κ ρ / ū)^2)``, ``ū`` the RMS of ``|U_i|`` over the
-recordings and ``κ =`` :data:`CONTROL_SCALE` (broad: a control as large as
-its typical value may move the orbit by its whole size). A response of ``w1``
-as well would move the time origin and the size themselves; on the rig the
-data do not determine it (``docs/validation.md``). Predictions at a new μ, the
+``w1``, whose crest is the time origin and whose size CBC's target sets),
+integrated out with the map: ``h_r, h_i ~ N(0, (κ ρ / ū)^2)``, ``ū`` the RMS
+of ``|U_i|`` and ``κ =`` :data:`CONTROL_SCALE`. Predictions at a new μ, the
 diagram and its branches are the uncontrolled system's (``U = 0``).
 
 **Model discrepancy** (:mod:`bayeshopf.model.discrepancy`). The recorded
@@ -84,12 +75,12 @@ the diagram on the orbit's fundamental (smooth, scale ``η``, length ``ℓ``) an
 on every harmonic (independent, ``σ_rel``), both relative to the model's own
 orbit size. Its smooth part is a few more linear columns of ``Φ`` (one latent
 per recording and fundamental coefficient, :func:`linear_system`), integrated
-out with the map; its independent part replaces ``σ_rel y`` in ``D``. ``η``
-and ``ℓ`` are sampled with the normal form, so the Hopf and fold intervals
-widen when the recordings disagree with the model, and predictions at a new μ
-take the discrepancy's conditional there (``predictive.discrepancy_draws``).
-With ``spec.discrepancy_scale = None`` the model is the one without it
-(``D = diag(se² + σ_c² + (σ_rel y)²)``).
+out with the map; its independent part replaces ``σ_rel y`` in ``D``. ``η`` and
+``ℓ`` are sampled with the normal form, so the Hopf and fold intervals widen
+when the recordings disagree with the model, and predictions at a new μ take
+the discrepancy's conditional there (``predictive.discrepancy_draws``). With
+``spec.discrepancy_scale = None`` the model is the one without it (``D =
+diag(se² + σ_c² + (σ_rel y)²)``).
 
 **Extra model error away from the recordings** (predictions only): the rule of
 the model without the discrepancy and a user's override,
@@ -367,11 +358,8 @@ def normal_form_sites(spec: CollapsedSpec) -> dict:
 def hyper_sites(spec: CollapsedSpec) -> dict:
     """``τ_μ``, ``τ_s``, the model error ``σ_c`` of each channel, the relative one ``σ_rel``.
 
-    With the discrepancy (``spec.has_discrepancy``) also its scale ``η`` and
-    length ``ℓ`` (:mod:`bayeshopf.model.discrepancy`); ``σ_rel`` is then its
-    part independent between recordings. At infinite width with
-    ``spec.nn_mu_scale`` ``None``, the network's input scale on ``μ̃``, ``ν``
-    (:mod:`bayeshopf.model.network_kernel`).
+    With the discrepancy also its scale ``η`` and length ``ℓ`` (``σ_rel`` its part
+    independent between recordings); with ``spec.nn_mu_scale`` ``None``, ``ν``.
     """
     h = {"tau_mu": numpyro.sample(
             "tau_mu", dist.LogNormal(np.log(TAU_MU_PRIOR[0]), TAU_MU_PRIOR[1])),
@@ -391,14 +379,11 @@ def hyper_sites(spec: CollapsedSpec) -> dict:
 
 
 def _relative_error(spec: CollapsedSpec):
-    """``σ_rel ~ HalfNormal(SIGMA_REL_PRIOR)``, a site; with the discrepancy as ``S|z|``.
+    """``σ_rel ~ HalfNormal(SIGMA_REL_PRIOR)``; with the discrepancy as ``S|z|``, ``z ~ N(0, 1)``.
 
-    With the discrepancy the data say little about ``σ_rel`` beside ``η``, and
-    its posterior reaches down to 0: in ``log σ_rel`` (NumPyro's unconstrained
-    space) that is a long tail that shrinks NUTS's steps. Only ``σ_rel²``
-    enters the likelihood, so ``σ_rel = S|z|`` with ``z ~ N(0, 1)``
-    (``sigma_rel_z``) has the same prior and posterior and is smooth through
-    0; ``sigma_rel`` is then a deterministic site.
+    The same prior (only ``σ_rel²`` enters the likelihood), but smooth through
+    0, where its posterior reaches when ``η`` carries the misfit: in ``log σ_rel``
+    (NumPyro's unconstrained space) a long tail that shrinks NUTS's steps.
     """
     if not spec.has_discrepancy:
         return numpyro.sample("sigma_rel", dist.HalfNormal(SIGMA_REL_PRIOR))
