@@ -23,8 +23,9 @@ the window at the fold, ``unfolding="window"``; ``kernel_f``: ``kernel`` with th
 discrepancy's floor ``κ = 1`` near the Hopf point, ``discrepancy_floor=1``;
 ``kernel_s``: ``kernel``, its row also holding the intervals of μ0 and the fold under
 the discrepancy in μ of :mod:`bayeshopf.model.bifurcation_shift` for each ``κ`` of
-:data:`KAPPAS`, read by ``--summary`` as models ``kernel_s@κ``; every other setting the
-default):
+:data:`KAPPAS`, read by ``--summary`` as models ``kernel_s@κ``, and at ``κ = 2`` with the
+floors of :data:`FLOORS` on the scale in μ, ``kernel_s@2fφ`` (both points) and
+``kernel_s@2hφ`` (the Hopf point only); every other setting the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -83,6 +84,12 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
 #: (:mod:`bayeshopf.model.bifurcation_shift`) whose intervals a ``kernel_s`` row holds;
 #: ``--summary --models kernel_s@2`` reads them as a model of their own.
 KAPPAS = (1.0, 2.0, 4.0, 8.0)
+#: Floors ``φ`` of the scale in μ: ``κ√(η² + φ²)G h`` instead of ``κηG h`` (the error of
+#: an extrapolation that the recordings' own misfit ``η`` does not show), at ``κ`` =
+#: :data:`FLOOR_KAPPA`, on both points (``kernel_s@2f0.05``) or on the Hopf point only
+#: (``kernel_s@2h0.05``); post hoc, from the same draws and normal pairs as ``kernel_s@2``.
+FLOORS = (0.025, 0.05, 0.1)
+FLOOR_KAPPA = 2.0
 NOISE = 0.015
 ALPHA = 0.1
 
@@ -136,12 +143,21 @@ def shifted_intervals(post) -> dict:
     f = post.features
     sign = np.where(f.unstable, -1.0, 1.0)
     out = {}
+    draws = {}
     for kappa in KAPPAS:
-        d = shift_draws(post.spec, post.theta, f.mu, sign, kappa, jax.random.PRNGKey(0))
-        out[str(kappa)] = {}
+        draws[str(kappa)] = shift_draws(post.spec, post.theta, f.mu, sign, kappa,
+                                        jax.random.PRNGKey(0))
+    plain = shift_draws(post.spec, post.theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0))
+    for phi in FLOORS:
+        theta = {**post.theta, "eta": np.hypot(np.asarray(post.theta["eta"]), phi)}
+        d = shift_draws(post.spec, theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0))
+        draws[f"{FLOOR_KAPPA:g}f{phi:g}"] = d
+        draws[f"{FLOOR_KAPPA:g}h{phi:g}"] = {**plain, "mu0": d["mu0"]}
+    for key, d in draws.items():
+        out[key] = {}
         for k, v in d.items():
             iv = interval(v, 1 - ALPHA)
-            out[str(kappa)][k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}
+            out[key][k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}
     return out
 
 
@@ -153,7 +169,8 @@ def expand_shifts(rows) -> list:
             continue
         out.append({**r, "model": "kernel_s@0"})
         for kappa, ivs in r["shift"].items():
-            row = {**r, "model": f"kernel_s@{float(kappa):g}"}
+            name = f"{float(kappa):g}" if kappa.replace(".", "").isdigit() else kappa
+            row = {**r, "model": f"kernel_s@{name}"}
             for k, iv in ivs.items():
                 t = r["truth"][k]
                 row[k] = {**iv, "inside": bool(iv["lo"] <= t <= iv["hi"]),
