@@ -147,7 +147,7 @@ def shifted_intervals(post) -> dict:
     for kappa in KAPPAS:
         draws[str(kappa)] = shift_draws(post.spec, post.theta, f.mu, sign, kappa,
                                         jax.random.PRNGKey(0))
-    plain = shift_draws(post.spec, post.theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0))
+    plain = draws[str(FLOOR_KAPPA)]            # the same normal pairs as every variant
     for phi in FLOORS:
         theta = {**post.theta, "eta": np.hypot(np.asarray(post.theta["eta"]), phi)}
         d = shift_draws(post.spec, theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0))
