@@ -386,8 +386,9 @@ def _rebuild(saved: SavedHybrid):
     method = summary.get("diagnostics", {}).get("posterior", {}).get("method", "nuts")
     run = PosteriorRun(method, chains, betas, gammas, int(model.get("divergences", 0)))
     known = {f.name for f in fields(CollapsedSettings)}
-    settings = CollapsedSettings(**{k: v for k, v in summary.get("settings", {}).items()
-                                    if k in known})
+    saved_settings = {"mu_discrepancy_floor": 0.0,   # a folder from before the floor
+                      **summary.get("settings", {})}
+    settings = CollapsedSettings(**{k: v for k, v in saved_settings.items() if k in known})
     post = HybridPosterior(spec, features, map_point, run, settings,
                            int(summary.get("seed", 0)), summary.get("mu_label", "mu"),
                            summary.get("mu_units", ""), summary.get("amplitude_units", ""),

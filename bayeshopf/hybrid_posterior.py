@@ -171,7 +171,8 @@ class HybridPosterior:
         rig = {k: s[k + RIG] for k in ("mu0", "mu_fold") if k + RIG in s}
         return branch_knots(self.spec, self.theta, rig, f.mu, np.where(f.unstable, -1.0, 1.0),
                             self.settings.mu_discrepancy,
-                            jax.random.fold_in(jax.random.PRNGKey(self.seed), 1))
+                            jax.random.fold_in(jax.random.PRNGKey(self.seed), 1),
+                            floor=self.settings.mu_discrepancy_floor)
 
     def model_mu(self, mu, branch: str = "stable", n_draws: int | None = N_BAND_DRAWS):
         """The model's μ of the point the rig has at each ``mu`` on ``branch``, ``(n, n_mu)``.

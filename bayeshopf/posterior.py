@@ -94,7 +94,8 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
     map_point = ci.fit_map(inputs, max_steps=settings.lbfgs_steps)
     timings["map"] = time.perf_counter() - t0
     run = ci.sample_posterior(inputs, map_point, settings, seed=seed, progress=progress)
-    run = with_rig_bifurcations(run, spec, features, settings.mu_discrepancy, seed)
+    run = with_rig_bifurcations(run, spec, features, settings.mu_discrepancy, seed,
+                                settings.mu_discrepancy_floor)
     timings["posterior"] = run.seconds
     post = HybridPosterior(spec, features, map_point, run, settings, seed, *labels,
                            timings=timings)
@@ -107,13 +108,14 @@ def _fit_features(features: HarmonicFeatures, labels: tuple, criticality: str, s
 
 
 def with_rig_bifurcations(run: ci.PosteriorRun, spec: cm.CollapsedSpec,
-                          features: HarmonicFeatures, kappa: float, seed: int) -> ci.PosteriorRun:
+                          features: HarmonicFeatures, kappa: float, seed: int,
+                          floor: float = 0.0) -> ci.PosteriorRun:
     """``run`` with the rig's Hopf point and fold, ``mu0_rig`` and ``mu_fold_rig`` (per draw).
 
     The normal form's points moved by the discrepancy in μ
-    (:func:`~bayeshopf.model.bifurcation_shift.shift_draws`, ``κ = kappa``, its
-    normal pairs drawn from ``seed``); ``run`` itself without the model
-    discrepancy or with ``kappa`` 0.
+    (:func:`~bayeshopf.model.bifurcation_shift.shift_draws`, ``κ = kappa``,
+    ``φ = floor``, its normal pairs drawn from ``seed``); ``run`` itself without
+    the model discrepancy or with ``kappa`` 0.
     """
     if not spec.has_discrepancy or kappa == 0:
         return run
@@ -124,7 +126,7 @@ def with_rig_bifurcations(run: ci.PosteriorRun, spec: cm.CollapsedSpec,
     samples = run.samples
     theta = {k: v for k, v in samples.items() if not k.startswith("marginal")}
     moved = shift_draws(spec, theta, features.mu, np.where(features.unstable, -1.0, 1.0),
-                        kappa, jax.random.PRNGKey(seed))
+                        kappa, jax.random.PRNGKey(seed), floor=floor)
     shape = np.shape(run.chains["mu0"])
     chains = {**run.chains, **{f"{k}{RIG}": v.reshape(shape) for k, v in moved.items()}}
     return replace(run, chains=chains)

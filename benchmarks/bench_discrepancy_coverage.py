@@ -149,8 +149,8 @@ def shifted_intervals(post) -> dict:
                                         jax.random.PRNGKey(0))
     plain = draws[str(FLOOR_KAPPA)]            # the same normal pairs as every variant
     for phi in FLOORS:
-        theta = {**post.theta, "eta": np.hypot(np.asarray(post.theta["eta"]), phi)}
-        d = shift_draws(post.spec, theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0))
+        d = shift_draws(post.spec, post.theta, f.mu, sign, FLOOR_KAPPA, jax.random.PRNGKey(0),
+                        floor=phi)
         draws[f"{FLOOR_KAPPA:g}f{phi:g}"] = d
         draws[f"{FLOOR_KAPPA:g}h{phi:g}"] = {**plain, "mu0": d["mu0"]}
     for key, d in draws.items():

@@ -79,15 +79,19 @@ def test_kappa_zero_gives_the_models_own_points():
     np.testing.assert_array_equal(d["mu_fold"], theta["mu_fold"])
 
 
-def test_small_shifts_have_the_first_order_spread():
-    """``sd = κ η G √(conditional variance)`` where the shift is small against its distance."""
-    spec, theta = _spec(), _theta(40_000, eta=0.002)
+@pytest.mark.parametrize(("eta", "floor", "scale"), [(0.002, 0.0, 0.002),
+                                                      (0.0012, 0.0016, 0.002),
+                                                      (0.0, 0.002, 0.002)])
+def test_small_shifts_have_the_first_order_spread(eta, floor, scale):
+    """``sd = κ √(η² + φ²) G √(conditional variance)`` where the shift is small
+    against its distance (``scale``: √(η² + φ²), written out)."""
+    spec, theta = _spec(), _theta(40_000, eta=eta)
     x, ends = _coordinates(spec, theta)
     var = np.diag(_dense_conditional(x, ends, 0.5))
-    d = bs.shift_draws(spec, theta, MU, SIGN, 1.0, jax.random.PRNGKey(3))
+    d = bs.shift_draws(spec, theta, MU, SIGN, 1.0, jax.random.PRNGKey(3), floor=floor)
     gap = 17.0 - 14.9
     for name, v in zip(("mu0", "mu_fold"), var, strict=True):
-        want = 0.002 * gap * np.sqrt(v)
+        want = scale * gap * np.sqrt(v)
         assert np.std(d[name]) == pytest.approx(want, rel=0.03)
         assert abs(np.mean(d[name]) - theta[name][0]) < 0.05 * want
 
@@ -113,8 +117,9 @@ def test_needs_the_discrepancy():
 
 
 # ------------------------------------------------------------------ along the branches
-def _knots(theta, rig, kappa, seed=0):
-    return bs.branch_knots(_spec(), theta, rig, MU, SIGN, kappa, jax.random.PRNGKey(seed))
+def _knots(theta, rig, kappa, seed=0, floor=0.0):
+    return bs.branch_knots(_spec(), theta, rig, MU, SIGN, kappa, jax.random.PRNGKey(seed),
+                           floor=floor)
 
 
 def test_the_rigs_branches_pass_through_the_recordings_and_end_at_its_points():
@@ -166,14 +171,16 @@ def _dense_move(spec, theta, grid_mu, grid_sign, ends_move, ell, scale):
     return mean, scale * np.sqrt(var)
 
 
-def test_the_moves_along_the_branches_are_the_conditional_given_the_ends():
-    """Mean and sd at each point against the dense conditional given the recordings and the ends."""
+@pytest.mark.parametrize(("eta", "floor"), [(0.01, 0.0), (0.006, 0.008)])
+def test_the_moves_along_the_branches_are_the_conditional_given_the_ends(eta, floor):
+    """Mean and sd at each point against the dense conditional given the recordings and
+    the ends, at the scale ``√(η² + φ²) G`` (0.01 G in both cases)."""
     spec, n = _spec(), 20_000
-    theta = _theta(n, eta=0.01)
+    theta = _theta(n, eta=eta)
     ends_move = np.array([0.05, -0.04])
     rig = {"mu0": theta["mu0"] + ends_move[0], "mu_fold": theta["mu_fold"] + ends_move[1]}
     for b in (-1.0, 1.0):
-        model, moved = _knots(theta, rig, 1.0, seed=4)[b]
+        model, moved = _knots(theta, rig, 1.0, seed=4, floor=floor)[b]
         order = np.argsort(model, axis=1)                  # back to the model's order
         model = np.take_along_axis(model, order, 1)
         move = np.take_along_axis(moved, order, 1) - model

@@ -563,8 +563,9 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
 
 
 def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
-    """``--mu-discrepancy`` sets κ of the discrepancy in μ (2 by default); without
-    ``--discrepancy``, negative or not finite it is a one-line error before any fit."""
+    """``--mu-discrepancy`` sets κ of the discrepancy in μ (2 by default) and
+    ``--mu-discrepancy-floor`` its floor φ (0.05); without ``--discrepancy``,
+    negative or not finite each is a one-line error before any fit."""
     import bayeshopf.posterior
     from bayeshopf.errors import FitError
 
@@ -576,22 +577,26 @@ def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, ca
 
     monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
     base = ["demo", "--fast", "--no-figures", "--discrepancy"]
-    assert main([*base, "--out", str(tmp_path / "a"), "--mu-discrepancy", "0.5"]) == 2
+    assert main([*base, "--out", str(tmp_path / "a"), "--mu-discrepancy", "0.5",
+                 "--mu-discrepancy-floor", "0"]) == 2
     capsys.readouterr()
     assert seen["settings"].mu_discrepancy == 0.5
+    assert seen["settings"].mu_discrepancy_floor == 0.0
     seen.clear()
     assert main([*base, "--out", str(tmp_path / "b")]) == 2
     capsys.readouterr()
     assert seen["settings"].mu_discrepancy == 2.0
-    for args, why in (([*base, "--mu-discrepancy", "-1"], "a finite number ≥ 0 expected"),
-                      ([*base, "--mu-discrepancy", "inf"], "a finite number ≥ 0 expected"),
-                      (["demo", "--fast", "--no-figures", "--mu-discrepancy", "1"],
-                       "needs --discrepancy")):
-        seen.clear()
-        assert main([*args, "--out", str(tmp_path / "c")]) == 2
-        err = capsys.readouterr().err.strip()
-        assert len(err.splitlines()) == 1 and "--mu-discrepancy" in err, err
-        assert why in err and not seen
+    assert seen["settings"].mu_discrepancy_floor == 0.05
+    for flag in ("--mu-discrepancy", "--mu-discrepancy-floor"):
+        for args, why in (([*base, flag, "-1"], "a finite number ≥ 0 expected"),
+                          ([*base, flag, "inf"], "a finite number ≥ 0 expected"),
+                          (["demo", "--fast", "--no-figures", flag, "1"],
+                           "needs --discrepancy")):
+            seen.clear()
+            assert main([*args, "--out", str(tmp_path / "c")]) == 2
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and err.split()[3] == flag, err
+            assert why in err and not seen
 
 
 def test_nn_width_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):

@@ -1,5 +1,6 @@
 """The collapsed core end to end on planted systems (small problems; statistics in benchmarks)."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -168,7 +169,8 @@ def test_the_rigs_bifurcations_are_the_moved_points_and_hold_the_planted_ones(
     post, _, truth = planted_discrepancy
     f = post.features
     want = shift_draws(post.spec, post.theta, f.mu, np.where(f.unstable, -1.0, 1.0),
-                       post.settings.mu_discrepancy, jax.random.PRNGKey(post.seed))
+                       post.settings.mu_discrepancy, jax.random.PRNGKey(post.seed),
+                       floor=post.settings.mu_discrepancy_floor)
     for k in ("mu0", "mu_fold"):
         np.testing.assert_array_equal(post.samples[k + "_rig"], want[k])
         assert post.interval(k) == interval(want[k], 0.9)
@@ -180,6 +182,13 @@ def test_the_rigs_bifurcations_are_the_moved_points_and_hold_the_planted_ones(
     fit_folder.save_hybrid(post, tmp_path / "fit")
     saved = fit_folder.load_fit(tmp_path / "fit")
     assert saved.posterior.interval("mu_fold") == post.interval("mu_fold")
+    assert saved.posterior.settings.mu_discrepancy_floor == post.settings.mu_discrepancy_floor
+    # a folder saved before the floor existed drew its rig's points without one
+    path = tmp_path / "fit" / fit_folder.SUMMARY
+    old = json.loads(path.read_text())
+    del old["settings"]["mu_discrepancy_floor"]
+    path.write_text(json.dumps(old))
+    assert fit_folder.load_fit(tmp_path / "fit").posterior.settings.mu_discrepancy_floor == 0.0
 
 
 def test_the_rigs_branches_end_at_its_points_and_pass_through_the_recordings(

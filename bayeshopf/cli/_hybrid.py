@@ -65,6 +65,10 @@ def add_fit_options(g: FitGroups) -> None:
                          help="with --discrepancy: κ of its twin in μ, which moves the Hopf "
                          "point and the fold by the model's error beyond the recordings "
                          "(default 2; 0 reports the normal form's own points)")
+    g.model.add_argument("--mu-discrepancy-floor", type=float, default=None, metavar="PHI",
+                         help="with --discrepancy: φ, the floor on the discrepancy's scale η "
+                         "in that error, κ√(η² + φ²) times the fold–Hopf gap (default 0.05; "
+                         "0: none)")
     g.model.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
                          help="half-normal scale of the model error away from the recordings, "
                          "in log orbit size (default: per posterior draw 0.1, or 0.7 where "
@@ -107,12 +111,13 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
                        "2%)")
     if getattr(args, "nn_width", None) is not None:
         _nn_width(args.nn_width)
-    k = getattr(args, "mu_discrepancy", None)
-    if k is not None and not (math.isfinite(k) and k >= 0):
-        raise FitError(f"--mu-discrepancy {k:g}: a finite number ≥ 0 expected (default 2; 0: "
-                       "the normal form's own Hopf point and fold)")
-    if k is not None and not getattr(args, "discrepancy", False):
-        raise FitError("--mu-discrepancy sets the discrepancy in μ, which needs --discrepancy")
+    for flag, default in (("mu_discrepancy", "default 2; 0: the normal form's own Hopf point "
+                           "and fold"), ("mu_discrepancy_floor", "default 0.05; 0: none")):
+        k, opt = getattr(args, flag, None), "--" + flag.replace("_", "-")
+        if k is not None and not (math.isfinite(k) and k >= 0):
+            raise FitError(f"{opt} {k:g}: a finite number ≥ 0 expected ({default})")
+        if k is not None and not getattr(args, "discrepancy", False):
+            raise FitError(f"{opt} sets the discrepancy in μ, which needs --discrepancy")
     check_out(out, args.force)
     worker = None
     if not args.no_figures:   # imports beside NUTS, and a figure process
@@ -134,8 +139,9 @@ def _settings(args) -> inference.CollapsedSettings:
                        discrepancy=bool(getattr(args, "discrepancy", False)))
     if getattr(args, "extrapolation_scale", None) is not None:
         settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
-    if getattr(args, "mu_discrepancy", None) is not None:
-        settings = replace(settings, mu_discrepancy=args.mu_discrepancy)
+    for flag in ("mu_discrepancy", "mu_discrepancy_floor"):
+        if getattr(args, flag, None) is not None:
+            settings = replace(settings, **{flag: getattr(args, flag)})
     width = getattr(args, "nn_width", None)
     if width is not None:
         settings = replace(settings, nn_width=_nn_width(width))

@@ -60,10 +60,11 @@ def print_table(summary: dict, truth: dict | None = None) -> None:
         shown = {k: format_interval(v["median"], *v[key]) for k, v in own.items()}
         parts = [f"{k} {m} [{a}, {b}]" for k, (m, a, b) in shown.items()]
         kappa = summary.get("settings", {}).get("mu_discrepancy")
+        phi = summary.get("settings", {}).get("mu_discrepancy_floor", 0.0)
         print(textwrap.fill(
             f"(mu0 and mu_fold are the rig's: the normal form's own points, {'; '.join(parts)} "
-            f"{u}, moved by the discrepancy in μ, κ = {kappa:g}; docs/model_discrepancy.md)",
-            88))
+            f"{u}, moved by the discrepancy in μ, κ = {kappa:g}, φ = {phi:g}; "
+            "docs/model_discrepancy.md)", 88))
     print()
     print(f"{'recording':28s} {'mu':>8s} {'branch':>9s} {'measured':>10s} "
           f"{'predicted (' + pct + ')':>30s}  [{au}]")

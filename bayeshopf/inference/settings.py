@@ -25,6 +25,9 @@ from bayeshopf.model import discrepancy as dm
 #: by the interval scores of μ0 and the fold on a development block of simulated
 #: rigs and tested on a fresh one (``docs/model_discrepancy.md``).
 MU_DISCREPANCY = 2.0
+#: ``φ``, the floor on ``η`` in the discrepancy in μ's scale ``κ√(η² + φ²)G``
+#: (η's prior scale), chosen and tested as :data:`MU_DISCREPANCY` was.
+MU_DISCREPANCY_FLOOR = 0.05
 
 
 def _positive_or_none(x) -> bool:
@@ -105,6 +108,9 @@ class CollapsedSettings:
             form's points moved by an error in μ of ``κ η G`` times a unit
             process held at zero at the recordings; 0 reports the normal form's
             own points.
+        mu_discrepancy_floor: ``φ``, the floor on ``η`` in that error's scale,
+            ``κ √(η² + φ²) G``: a close fit to the recordings does not show that
+            the model extrapolates well; 0 for none.
     """
 
     # features
@@ -139,6 +145,7 @@ class CollapsedSettings:
     discrepancy: bool = False
     discrepancy_floor: float = dm.FLOOR
     mu_discrepancy: float = MU_DISCREPANCY
+    mu_discrepancy_floor: float = MU_DISCREPANCY_FLOOR
 
     def __post_init__(self):
         w = self.nn_width
@@ -152,10 +159,14 @@ class CollapsedSettings:
         if v != 1.0 and w is not None:
             raise FitError("nn_mu_scale: the network's input scale on μ is set only at "
                            f"infinite width (nn_width=None); got nn_width={w!r}")
-        k = self.mu_discrepancy
-        if isinstance(k, bool) or not isinstance(k, int | float) or not (0 <= k < math.inf):
-            raise FitError("mu_discrepancy: a finite number ≥ 0 expected (κ of the discrepancy "
-                           f"in μ at the Hopf point and the fold; 0: none); got {k!r}")
+        for name, what in (("mu_discrepancy", "κ of the discrepancy in μ at the Hopf point "
+                             "and the fold"),
+                           ("mu_discrepancy_floor", "φ, the floor on η in the discrepancy in "
+                            "μ's scale")):
+            k = getattr(self, name)
+            if isinstance(k, bool) or not isinstance(k, int | float) or not 0 <= k < math.inf:
+                raise FitError(f"{name}: a finite number ≥ 0 expected ({what}; 0: none); "
+                               f"got {k!r}")
         s = self.extrapolation_scale
         if not _positive_or_none(s):
             raise FitError("extrapolation_scale: a positive number or None expected (the "

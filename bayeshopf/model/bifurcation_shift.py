@@ -9,18 +9,21 @@ the model. Their *horizontal* twin is an error in μ along the diagram:
 
 .. math::
 
-    μ^*(x) = μ(x) + κ\, η\, G\, h(x),\qquad
+    μ^*(x) = μ(x) + κ\, \sqrt{η^2 + φ^2}\, G\, h(x),\qquad
     h \sim \mathcal{GP}\big(0, e^{-|x - x'|^2 / 2ℓ^2}\big),\quad h(x_i) = 0,
 
 with ``x = (μ̃, s²/\overline{s^2})`` the discrepancy's coordinates, its scale
 ``η`` and length ``ℓ`` (the same draws), ``G = μ_0 − μ_{SN}`` the fold–Hopf gap
-(``Δμ`` without a fold), and ``κ`` the size of the error in μ relative to the
-gap per unit of the orbit's relative error. The process is held at zero at
+(``Δμ`` without a fold), ``κ`` the size of the error in μ relative to the
+gap per unit of the orbit's relative error, and ``φ`` a floor on that error:
+recordings that the model fits closely (``η`` small) do not show that it
+extrapolates well, so the error beyond them keeps at least the scale ``κφG``.
+Below, ``η_φ = \sqrt{η^2 + φ^2}``. The process is held at zero at
 the training recordings ``x_i``, whose μ is known and through which the fit
 passes, so it is the error of the *extrapolation*: it grows with the distance
 of the Hopf point ``x_0 = (μ̃_0, 0)`` and the fold ``x_{SN} = (μ̃_{SN}, ½/\overline{s^2})``
 from the recordings, in units of ``ℓ``, and with the disagreement ``η``. The
-true bifurcation points are ``μ_0 + κηG\,h(x_0)`` and ``μ_{SN} + κηG\,h(x_{SN})``
+true bifurcation points are ``μ_0 + κη_φG\,h(x_0)`` and ``μ_{SN} + κη_φG\,h(x_{SN})``
 to first order, ``h`` at the two drawn jointly from the Gaussian-process
 conditional (:func:`endpoint_factor`); each moves in the log of its distance
 beyond the recordings that bound it (the fold stays below the lowest recording,
@@ -34,7 +37,7 @@ of the rig's bifurcation points under this discrepancy.
 The same process moves every point of the branches, not only their ends
 (:func:`branch_knots`): per draw, ``h`` is drawn at points along each branch
 given zero at the recordings and the values that put the ends at the rig's
-Hopf point and fold, and each point moves by ``κηG h``. A prediction at μ is
+Hopf point and fold, and each point moves by ``κη_φG h``. A prediction at μ is
 the model's (orbit, discrepancy, network, frequency) at the point that moves
 to μ (:func:`model_mu`), so the rig's branches pass through every recording and
 end at the rig's points, and a new measurement beyond the recordings carries
@@ -71,7 +74,12 @@ def endpoint_factor(x, x_end, ell):
     return jnp.linalg.cholesky(C)
 
 
-def _one(spec: CollapsedSpec, theta: dict, mu, sign, kappa, xi):
+def scale_in_mu(theta: dict, kappa, floor, gap):
+    """The error in μ per unit of ``h``: ``κ √(η² + φ²) G`` (module docstring)."""
+    return kappa * jnp.hypot(theta["eta"], floor) * gap
+
+
+def _one(spec: CollapsedSpec, theta: dict, mu, sign, kappa, floor, xi):
     """The shifts of one posterior draw ``theta`` (scalars), ``(m,)``: Hopf point, then fold."""
     a2 = theta.get("a2", -1.0)
     s = radius(spec, mu, sign, theta) / reference_radius(spec, a2)
@@ -85,7 +93,7 @@ def _one(spec: CollapsedSpec, theta: dict, mu, sign, kappa, xi):
     else:
         gap = spec.mu_span
     F = endpoint_factor(x, jnp.stack(ends), theta["ell"])
-    return kappa * theta["eta"] * gap * (F @ xi[: len(ends)])
+    return scale_in_mu(theta, kappa, floor, gap) * (F @ xi[: len(ends)])
 
 
 def _moved(spec: CollapsedSpec, theta: dict, eps):
@@ -104,7 +112,8 @@ def _moved(spec: CollapsedSpec, theta: dict, eps):
             theta["mu_fold"] - g_f * jnp.expm1(-eps[1] / g_f)]
 
 
-def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -> dict:
+def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key,
+                floor: float = 0.0) -> dict:
     """Draws of the rig's Hopf point (and fold) under the discrepancy in μ (module docstring).
 
     Args:
@@ -116,6 +125,7 @@ def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -
         sign: Their branch signs ``(n,)``.
         kappa: ``κ``; 0 gives the model's own points.
         key: JAX random key of the standard normal pair of each draw.
+        floor: ``φ``, the floor on ``η`` in the scale (0: none).
 
     Returns:
         ``{"mu0": (S,), "mu_fold": (S,)}`` (``mu_fold`` only when subcritical).
@@ -130,14 +140,15 @@ def shift_draws(spec: CollapsedSpec, theta: dict, mu, sign, kappa: float, key) -
     th = {k: jnp.asarray(v, dtype=float) for k, v in theta.items()}
     xi = jax.random.normal(key, (th["mu0"].shape[0], 2))
     moved = spec_jit(spec, _all)(th, xi, jnp.asarray(mu, dtype=float),
-                                 jnp.asarray(sign, dtype=float), jnp.asarray(kappa, dtype=float))
+                                 jnp.asarray(sign, dtype=float), jnp.asarray(kappa, dtype=float),
+                                 jnp.asarray(floor, dtype=float))
     return {n: np.asarray(moved[:, j]) for j, n in enumerate(names)}
 
 
-def _all(spec: CollapsedSpec, theta: dict, xi, mu, sign, kappa):
+def _all(spec: CollapsedSpec, theta: dict, xi, mu, sign, kappa, floor):
     """The moved points of every draw, ``(S, m)`` (compiled once per spec, :func:`shift_draws`)."""
     return jax.vmap(lambda t, z: jnp.stack(
-        _moved(spec, t, _one(spec, t, mu, sign, kappa, z))))(theta, xi)
+        _moved(spec, t, _one(spec, t, mu, sign, kappa, floor, z))))(theta, xi)
 
 
 # ------------------------------------------------------------------ along the branches
@@ -166,10 +177,10 @@ def _grid(spec: CollapsedSpec, theta: dict, mu_top):
     return (theta["mu0"] + (mu_top - theta["mu0"]) * k / N_ALONG)[None]
 
 
-def _along_one(spec: CollapsedSpec, theta: dict, ends_move, z, mu, sign, kappa, mu_top):
-    """One draw's moves ``κηG h`` at the points of :func:`_grid`, ``(B, N_ALONG)``.
+def _along_one(spec: CollapsedSpec, theta: dict, ends_move, z, mu, sign, kappa, floor, mu_top):
+    """One draw's moves ``κη_φG h`` at the points of :func:`_grid`, ``(B, N_ALONG)``.
 
-    ``h`` given zero at the recordings and ``ends_move / (κηG)`` at the ends.
+    ``h`` given zero at the recordings and ``ends_move / (κη_φG)`` at the ends.
     """
     a2 = theta.get("a2", -1.0)
     r_ref = reference_radius(spec, a2)
@@ -191,18 +202,18 @@ def _along_one(spec: CollapsedSpec, theta: dict, ends_move, z, mu, sign, kappa, 
                             + KNOT_JITTER * jnp.eye(xj.shape[0]))
     known = jnp.concatenate([jnp.zeros(x.shape[0]), ends_move[: len(ends)]])
     mean = L[nc:, :nc] @ jax.scipy.linalg.solve_triangular(L[:nc, :nc], known, lower=True)
-    move = mean + kappa * theta["eta"] * gap * (L[nc:, nc:] @ z[: xg.shape[0]])
+    move = mean + scale_in_mu(theta, kappa, floor, gap) * (L[nc:, nc:] @ z[: xg.shape[0]])
     return grid, move.reshape(grid.shape)
 
 
-def _along_all(spec: CollapsedSpec, theta: dict, ends_move, z, mu, sign, kappa, mu_top):
+def _along_all(spec: CollapsedSpec, theta: dict, ends_move, z, mu, sign, kappa, floor, mu_top):
     """:func:`_along_one` for every draw (compiled once per spec, :func:`branch_knots`)."""
-    return jax.vmap(lambda t, e, zz: _along_one(spec, t, e, zz, mu, sign, kappa, mu_top))(
+    return jax.vmap(lambda t, e, zz: _along_one(spec, t, e, zz, mu, sign, kappa, floor, mu_top))(
         theta, ends_move, z)
 
 
 def branch_knots(spec: CollapsedSpec, theta: dict, rig: dict, mu, sign, kappa: float,
-                 key) -> dict:
+                 key, floor: float = 0.0) -> dict:
     """Where each branch of the rig lies: knots ``(model μ, rig μ)`` per draw and branch.
 
     The discrepancy in μ moves every point of the diagram, not only the two
@@ -211,7 +222,7 @@ def branch_knots(spec: CollapsedSpec, theta: dict, rig: dict, mu, sign, kappa: f
     up to :data:`REACH` ``Δμ`` above the highest recording), given zero at the
     recordings and, at the Hopf point and the fold, the values that move them to
     the rig's points ``rig`` (drawn by :func:`shift_draws`); each point moves by
-    ``κηG h``; a point moved beyond one of its branch's ends is left out. Where
+    ``κη_φG h``; a point moved beyond one of its branch's ends is left out. Where
     the moves reorder two points (the process's slope above one), the knots are
     taken in the rig's order, so that the branch is a curve over μ through
     every recording.
@@ -225,6 +236,7 @@ def branch_knots(spec: CollapsedSpec, theta: dict, rig: dict, mu, sign, kappa: f
         sign: Their branch signs ``(n,)``.
         kappa: ``κ``, as the rig's points were drawn with.
         key: JAX random key of the standard normals along the branches.
+        floor: ``φ``, as the rig's points were drawn with.
 
     Returns:
         ``{sign: (model_mu, rig_mu)}``, each ``(S, K)``, ``rig_mu`` non-decreasing;
@@ -243,7 +255,7 @@ def branch_knots(spec: CollapsedSpec, theta: dict, rig: dict, mu, sign, kappa: f
     mu_top = float(mu.max() + REACH * spec.mu_span)
     grid, move = spec_jit(spec, _along_all)(th, jnp.asarray(moves), z, jnp.asarray(mu),
                                             jnp.asarray(sign), jnp.asarray(kappa, dtype=float),
-                                            jnp.asarray(mu_top))
+                                            jnp.asarray(floor, dtype=float), jnp.asarray(mu_top))
     grid, move = np.asarray(grid), np.asarray(move)
     start = "mu_fold" if sub else "mu0"           # where every branch starts
     out = {}
