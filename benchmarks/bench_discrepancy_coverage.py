@@ -7,7 +7,8 @@ prints the table of what finished, over the sets that every listed model fitted,
 each coverage's 90% Clopper–Pearson interval (and, with ``kernel_w``, the misses among
 the sets its fit's window check flags), and each model's coverage, width and score among
 the fits that warn of a relative model error above the limit and among the rest
-(``--warned-by MODEL``: every model's sets grouped by that model's warning).
+(``--warned-by MODEL``: every model's sets grouped by that model's warning), and
+among the sets whose effect is dry friction and among the rest.
 
 Each seed draws the 3-DOF aerofoil with its uncertain parameters from their priors
 (a few percent off nominal) and one effect the simulator lacks, written apart from
@@ -264,6 +265,7 @@ def summary(seeds=None, models=None, warned_by=None) -> None:
             print(f"| {design} | {model} | {len(sub)} | " + " | ".join(cells) + " |")
     flagged_misses(rows, models)
     warned_split(rows, models, warned_by)
+    effect_split(rows, models)
 
 
 #: The fit check's warning that the model misses the orbits (relative model error above
@@ -284,25 +286,47 @@ def warned_split(rows, models, by: str | None = None) -> None:
     print(f"\nGrouped by {grouped} (sets; μ0 inside, mean width, mean score; the fold's "
           "the same):\n\n"
           "| design | model | warned | not warned |\n|---|---|---|---|")
-
-    def cell(sub):
-        if not sub:
-            return "0"
-        parts = [f"{sum(r[k]['inside'] for r in sub)}, "
-                 f"{np.mean([r[k]['hi'] - r[k]['lo'] for r in sub]):.3f}, "
-                 f"{np.mean([r[k]['score'] for r in sub]):.3f}" for k in ("mu0", "mu_fold")]
-        return f"{len(sub)}; μ0 {parts[0]}; fold {parts[1]}"
-
     for design in DESIGNS:
         at, common = _fitted_by_all(rows, design, models)
         for model in models:
             if not common:
                 continue
             judge = by or model
-            cells = [cell([at[(s, model)] for s in common
-                           if any(WARNING in w for w in at[(s, judge)]["warnings"]) == warned])
+            cells = [_cell([at[(s, model)] for s in common
+                            if any(WARNING in w for w in at[(s, judge)]["warnings"]) == warned])
                      for warned in (True, False)]
             print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
+
+
+#: The effects of dry friction (a Stribeck law on heave or pitch), whose regularised
+#: damping at rest moves the Hopf point above where the orbits' sizes head to zero.
+DRY_FRICTION = ("heave_stribeck_friction", "pitch_stribeck_friction")
+
+
+def effect_split(rows, models) -> None:
+    """Coverage among the sets whose effect is dry friction (:data:`DRY_FRICTION`) and
+    among the rest, per design and model, over the sets every listed model fitted."""
+    print("\nGrouped by the effect (sets; μ0 inside, mean width, mean score; the fold's "
+          "the same):\n\n| design | model | dry friction | other effects |\n|---|---|---|---|")
+    for design in DESIGNS:
+        at, common = _fitted_by_all(rows, design, models)
+        for model in models:
+            if not common:
+                continue
+            cells = [_cell([at[(s, model)] for s in common
+                            if (at[(s, model)]["effect"] in DRY_FRICTION) == dry])
+                     for dry in (True, False)]
+            print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
+
+
+def _cell(sub) -> str:
+    """A group's size and, per point, how many hold the truth, the mean width and score."""
+    if not sub:
+        return "0"
+    parts = [f"{sum(r[k]['inside'] for r in sub)}, "
+             f"{np.mean([r[k]['hi'] - r[k]['lo'] for r in sub]):.3f}, "
+             f"{np.mean([r[k]['score'] for r in sub]):.3f}" for k in ("mu0", "mu_fold")]
+    return f"{len(sub)}; μ0 {parts[0]}; fold {parts[1]}"
 
 
 def flagged_misses(rows, models) -> None:
