@@ -283,19 +283,8 @@ def warned_split(rows, models, by: str | None = None) -> None:
     warning (the same sets for all), instead of each model's own.
     """
     grouped = f"the warning of {by}" if by else "each fit's own warning"
-    print(f"\nGrouped by {grouped} (sets; μ0 inside, mean width, mean score; the fold's "
-          "the same):\n\n"
-          "| design | model | warned | not warned |\n|---|---|---|---|")
-    for design in DESIGNS:
-        at, common = _fitted_by_all(rows, design, models)
-        for model in models:
-            if not common:
-                continue
-            judge = by or model
-            cells = [_cell([at[(s, model)] for s in common
-                            if any(WARNING in w for w in at[(s, judge)]["warnings"]) == warned])
-                     for warned in (True, False)]
-            print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
+    _two_groups(rows, models, grouped, ("warned", "not warned"),
+                lambda r, s, model: any(WARNING in w for w in r[(s, by or model)]["warnings"]))
 
 
 #: The effects of dry friction (a Stribeck law on heave or pitch), whose regularised
@@ -306,16 +295,22 @@ DRY_FRICTION = ("heave_stribeck_friction", "pitch_stribeck_friction")
 def effect_split(rows, models) -> None:
     """Coverage among the sets whose effect is dry friction (:data:`DRY_FRICTION`) and
     among the rest, per design and model, over the sets every listed model fitted."""
-    print("\nGrouped by the effect (sets; μ0 inside, mean width, mean score; the fold's "
-          "the same):\n\n| design | model | dry friction | other effects |\n|---|---|---|---|")
+    _two_groups(rows, models, "the effect", ("dry friction", "other effects"),
+                lambda r, s, model: r[(s, model)]["effect"] in DRY_FRICTION)
+
+
+def _two_groups(rows, models, title: str, names: tuple[str, str], first) -> None:
+    """Per design and model, :func:`_cell` of the sets where ``first(at, seed, model)``
+    holds and of the rest, over the sets every listed model fitted."""
+    print(f"\nGrouped by {title} (sets; μ0 inside, mean width, mean score; the fold's "
+          f"the same):\n\n| design | model | {names[0]} | {names[1]} |\n|---|---|---|---|")
     for design in DESIGNS:
         at, common = _fitted_by_all(rows, design, models)
         for model in models:
             if not common:
                 continue
-            cells = [_cell([at[(s, model)] for s in common
-                            if (at[(s, model)]["effect"] in DRY_FRICTION) == dry])
-                     for dry in (True, False)]
+            cells = [_cell([at[(s, model)] for s in common if first(at, s, model) == group])
+                     for group in (True, False)]
             print(f"| {design} | {model} | {cells[0]} | {cells[1]} |")
 
 
