@@ -105,7 +105,7 @@ class CollapsedSettings:
         mu_discrepancy: With the discrepancy, ``κ`` of its twin in μ at the Hopf
             point and the fold (:mod:`bayeshopf.model.bifurcation_shift`): the
             fit's ``mu0`` and ``mu_fold`` intervals are the rig's, the normal
-            form's points moved by an error in μ of ``κ η G`` times a unit
+            form's points moved by an error in μ of ``κ √(η² + φ²) G`` times a unit
             process held at zero at the recordings; 0 reports the normal form's
             own points.
         mu_discrepancy_floor: ``φ``, the floor on ``η`` in that error's scale,
