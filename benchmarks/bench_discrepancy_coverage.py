@@ -284,7 +284,7 @@ def warned_split(rows, models, by: str | None = None) -> None:
     """
     grouped = f"the warning of {by}" if by else "each fit's own warning"
     _two_groups(rows, models, grouped, ("warned", "not warned"),
-                lambda r, s, model: any(WARNING in w for w in r[(s, by or model)]["warnings"]))
+                lambda at, s, model: any(WARNING in w for w in at[(s, by or model)]["warnings"]))
 
 
 #: The effects of dry friction (a Stribeck law on heave or pitch), whose regularised
@@ -296,7 +296,7 @@ def effect_split(rows, models) -> None:
     """Coverage among the sets whose effect is dry friction (:data:`DRY_FRICTION`) and
     among the rest, per design and model, over the sets every listed model fitted."""
     _two_groups(rows, models, "the effect", ("dry friction", "other effects"),
-                lambda r, s, model: r[(s, model)]["effect"] in DRY_FRICTION)
+                lambda at, s, model: at[(s, model)]["effect"] in DRY_FRICTION)
 
 
 def _two_groups(rows, models, title: str, names: tuple[str, str], first) -> None:
