@@ -469,6 +469,12 @@ def test_the_discrepancy_is_in_every_prediction_and_a_saved_fit_predicts_the_sam
     bad = replace(post, run=replace(post.run, chains=chains))
     (w,) = [w for w in diagnose(bad)["warnings"] if "relative model error" in w]
     assert "model discrepancy carries it" in w and "by leave-one-out" in w
+    # the fit's Hopf point and fold are moved by the discrepancy in μ: they carry it
+    assert "Hopf and fold intervals carry it through the discrepancy in μ" in w
+    assert "do not carry" not in w
+    # ... unless the user asked for the normal form's own points
+    own = replace(bad, settings=replace(bad.settings, mu_discrepancy=0.0))
+    (w,) = [w for w in diagnose(own)["warnings"] if "relative model error" in w]
     assert "Hopf and fold intervals do not carry this misfit" in w
 
 @pytest.fixture(scope="module")

@@ -35,6 +35,13 @@ SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
 #: form's extrapolation, not the misfit (``docs/limits.md`` has the simulated rigs).
 HOPF_FOLD_CAVEAT = ("the Hopf and fold intervals do not carry this misfit, and on simulated "
                     "rigs whose fits warned so they mostly missed the truth (docs/limits.md)")
+#: ... and with the discrepancy in μ (``mu_discrepancy > 0``), which moves both
+#: points by the model's error there: they carry it, but dry friction and other
+#: effects below the smallest recorded orbit can still hide the Hopf point.
+HOPF_FOLD_CAVEAT_MOVED = (
+    "the Hopf and fold intervals carry it through the discrepancy in μ, but on simulated "
+    "rigs whose fits warned so the Hopf point's interval often missed the truth where an "
+    "effect below the smallest recorded orbit (dry friction) hides it (docs/limits.md)")
 #: With the window at the fold (``unfolding="window"``): a posterior median of
 #: its depth ``|A|`` above this many prior SDs is reported as the recordings
 #: near the fold disagreeing with the normal form by more than its prior allows.
@@ -200,7 +207,8 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
             f"fit: relative model error {100 * rel:.1f}% (limit {100 * SIGMA_REL_MAX:.0f}%): "
             "the model misses the orbits by that fraction; the model discrepancy carries it "
             "into the bands, which may still be too narrow (check them by leave-one-out: "
-            f"bayeshopf.validation.leave_one_out); {HOPF_FOLD_CAVEAT}")
+            "bayeshopf.validation.leave_one_out); "
+            + (HOPF_FOLD_CAVEAT_MOVED if post.settings.mu_discrepancy > 0 else HOPF_FOLD_CAVEAT))
     elif rel > SIGMA_REL_MAX:
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
                         f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
