@@ -4,6 +4,8 @@
     python benchmarks/bench_sbc.py --design sweep --seeds 0-199
     python benchmarks/bench_sbc.py --design paired --seeds 0-199 --pipeline
     python benchmarks/bench_sbc.py --summary        # table and rank histograms
+    python benchmarks/bench_sbc.py --design paired --seeds 2000-2199 --pipeline --nn-width inf
+    python benchmarks/bench_sbc.py --summary --seeds 2000-2199 --nn-width inf
 
 Each simulation draws a data set from the model's prior
 (:func:`bayeshopf.model.prior_predictive.draw_data`) at one design, fits it with
@@ -21,7 +23,10 @@ branches, the standard errors and the model's data constants ρ, q, the frame):
   16.2 m/s): no unstable recording near the Hopf point.
 
 The model is the default's structure with the discrepancy, the curved
-unfolding and the frequency model, no control term. NUTS is NumPyro's kernel
+unfolding and the frequency model, no control term; with ``--nn-width inf`` the
+map's network is at infinite width (``Settings(nn_width=None)``, the network's
+kernel built on the design's recordings), as ``--nn-width inf --discrepancy``
+fits. NUTS is NumPyro's kernel
 (``numpyro.infer.hmc.hmc``), with the data as traced arguments (one
 compilation per design): 2 chains of
 ``--warmup`` + ``--samples`` steps from the package's deterministic start, a
@@ -41,10 +46,12 @@ diagnosis) takes the same noise-free coefficients, only moves each
 recording's time origin to its crest as the features do, and adds the
 design's measurement noise to the coefficients: what the alignment alone does.
 
-Writes one JSON line per simulation to ``benchmarks/results/sbc_<design>[_pipeline[_D s]].jsonl``
-(appended, so that a run can be stopped and resumed); ``--summary`` reads them,
-writes ``benchmarks/sbc.json`` (the table ``docs/model_discrepancy.md`` quotes)
-and ``docs/sbc_ranks.png``.
+Writes one JSON line per simulation to
+``benchmarks/results/sbc_<design>[_inf][_pipeline[_D s]].jsonl`` (appended, so
+that a run can be stopped and resumed); ``--summary`` reads them, updates their
+rows of ``benchmarks/sbc.json`` (the table ``docs/model_discrepancy.md`` quotes;
+rows of runs whose results are not here are kept) and draws
+``docs/sbc_ranks.png`` (``docs/sbc_ranks_inf.png`` with ``--nn-width inf``).
 """
 
 from __future__ import annotations
@@ -73,7 +80,7 @@ SITES = ("mu0", "mu_fold", "eta", "ell", "gap_hopf", "gap_fold", "w_unfold", "si
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def design(name: str):
+def design(name: str, nn_width: int | None = 16):
     """``(spec, features, recordings)`` of a design (module docstring)."""
     from bayeshopf.features.harmonics import extract_harmonics
     from bayeshopf.inference.settings import build_spec
@@ -89,7 +96,7 @@ def design(name: str):
         raise SystemExit(f"--design: 'paired' or 'sweep' expected; got {name!r}")
     idx = np.flatnonzero(keep)
     f = f.subset(idx)
-    spec = build_spec(f, "subcritical", control=False, discrepancy=True)
+    spec = build_spec(f, "subcritical", control=False, discrepancy=True, nn_width=nn_width)
     return spec, f, rs.subset(idx)
 
 
@@ -212,12 +219,12 @@ def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
             "divergences": div, "rhat_max": rhat, "ess_min": ess, "wall_s": wall}
 
 
-def results_path(name: str, pipeline: bool, duration: float | None, aligned: bool = False
-                 ) -> Path:
-    """``benchmarks/results/sbc_<design>[_pipeline[_<D>s] | _aligned].jsonl``."""
+def results_path(name: str, pipeline: bool, duration: float | None, aligned: bool = False,
+                 nn_width: int | None = 16) -> Path:
+    """``benchmarks/results/sbc_<design>[_inf][_pipeline[_<D>s] | _aligned].jsonl``."""
     tag = ("_aligned" if aligned else "" if not pipeline
            else "_pipeline" + ("" if duration is None else f"_{duration:g}s"))
-    return RESULTS_DIR / f"sbc_{name}{tag}.jsonl"
+    return RESULTS_DIR / f"sbc_{name}{'_inf' if nn_width is None else ''}{tag}.jsonl"
 
 
 def parse_seeds(s: str) -> list[int]:
@@ -227,14 +234,14 @@ def parse_seeds(s: str) -> list[int]:
 
 def run_design(name: str, seeds: list[int], warmup: int, samples: int,
                pipeline: bool = False, duration: float | None = None,
-               aligned: bool = False) -> None:
+               aligned: bool = False, nn_width: int | None = 16) -> None:
     from bayeshopf._x64 import ensure_x64
 
     ensure_x64()
-    spec, f, rs = design(name)
+    spec, f, rs = design(name, nn_width)
     sign = np.where(f.unstable, -1.0, 1.0)
     run = make_runner(spec, f.mu, sign, f.coeffs_se, f.omega_se, warmup, samples)
-    out = results_path(name, pipeline, duration, aligned)
+    out = results_path(name, pipeline, duration, aligned, nn_width)
     out.parent.mkdir(parents=True, exist_ok=True)
     done = set()
     if out.exists():
@@ -244,7 +251,7 @@ def run_design(name: str, seeds: list[int], warmup: int, samples: int,
             continue
         rec = one(seed, spec, f, rs, run, pipeline, duration, aligned)
         rec.update(design=name, warmup=warmup, samples=samples, pipeline=pipeline,
-                   duration=duration, aligned=aligned)
+                   duration=duration, aligned=aligned, nn_width=nn_width)
         with out.open("a") as fh:
             fh.write(json.dumps(rec) + "\n")
         print(f"sbc {out.stem}: seed {seed}: ranks mu0 {rec['ranks']['mu0']} fold "
@@ -252,7 +259,9 @@ def run_design(name: str, seeds: list[int], warmup: int, samples: int,
               f"{rec['divergences']} divergent, {rec['wall_s']:.1f} s", file=sys.stderr, flush=True)
 
 
-def summary(seeds: list[int]) -> None:
+def summary(seeds: list[int], infinite: bool = False) -> None:
+    """The rows of the runs of ``seeds`` (at infinite width with ``infinite``, else the
+    16-unit network's): ``sbc.json`` updated, their rank histograms drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -266,7 +275,7 @@ def summary(seeds: list[int]) -> None:
         for path in sorted(RESULTS_DIR.glob(f"sbc_{name}*.jsonl")):
             recs = [json.loads(x) for x in path.read_text().splitlines() if x]
             recs = [x for x in recs if x["seed"] in set(seeds)]
-            if recs:
+            if recs and ("_inf" in path.stem) == infinite:
                 runs.append((path.stem.removeprefix("sbc_"), recs))
     fig, axes = plt.subplots(len(runs), len(shown), figsize=(10, 2.75 * len(runs)),
                              sharey=True, squeeze=False)
@@ -305,8 +314,10 @@ def summary(seeds: list[int]) -> None:
                  "(solid: expected count; dashed: 99% range of a bin under uniform ranks)",
                  fontsize=9)
     fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "sbc_ranks.png", dpi=110)
-    atomic_write(Path(__file__).with_name("sbc.json"), json.dumps(table, indent=1) + "\n")
+    fig.savefig(ROOT / "docs" / f"sbc_ranks{'_inf' if infinite else ''}.png", dpi=110)
+    path = Path(__file__).with_name("sbc.json")
+    kept = json.loads(path.read_text()) if path.exists() else {}
+    atomic_write(path, json.dumps({**kept, **table}, indent=1) + "\n")
     for name, row in table.items():
         print(f"{name}: n {row['n']}, R̂ > 1.01 in {row['rhat_above_1.01']}, divergences in "
               f"{row['with_divergences']}, median {row['median_wall_s']:.1f} s")
@@ -326,17 +337,20 @@ def main() -> None:
                     help="with --pipeline: keep the first D seconds of each record")
     ap.add_argument("--aligned", action="store_true",
                     help="coefficients only moved to the crest's time origin (no time series)")
+    ap.add_argument("--nn-width", default="16",
+                    help="hidden units of the map's network, or 'inf' for its infinite width")
     ap.add_argument("--summary", action="store_true")
     a = ap.parse_args()
+    nn_width = None if a.nn_width == "inf" else int(a.nn_width)
     if a.summary:
-        summary(parse_seeds(a.seeds))
+        summary(parse_seeds(a.seeds), infinite=nn_width is None)
     elif a.design:
         if a.duration is not None and not a.pipeline:
             ap.error("--duration needs --pipeline")
         if a.aligned and a.pipeline:
             ap.error("--aligned and --pipeline are two different runs; give one")
         run_design(a.design, parse_seeds(a.seeds), a.warmup, a.samples, a.pipeline, a.duration,
-                   a.aligned)
+                   a.aligned, nn_width)
     else:
         ap.error("--design or --summary expected")
 
