@@ -49,7 +49,7 @@ design's measurement noise to the coefficients: what the alignment alone does.
 Writes one JSON line per simulation to
 ``benchmarks/results/sbc_<design>[_inf][_pipeline[_D s]].jsonl`` (appended, so
 that a run can be stopped and resumed); ``--summary`` reads them, updates their
-rows of ``benchmarks/sbc.json`` (the table ``docs/model_discrepancy.md`` quotes;
+rows of ``benchmarks/sbc.json`` (the tables ``docs/inference.md`` quotes;
 rows of runs whose results are not here are kept) and draws
 ``docs/sbc_ranks.png`` (``docs/sbc_ranks_inf.png`` with ``--nn-width inf``).
 """
