@@ -185,7 +185,9 @@ def test_cli_simulate_effect_then_discrepancy(tmp_path, flutter):
     assert set(r) >= {"file", "mu", "branch", "amplitude_error", "frequency_error", "channel",
                       "phase_range"}
     assert set(d["fit"]) == {"before", "after"}
-    assert (out / "report.md").read_text().startswith("# Discrepancy analysis")
+    md = (out / "report.md").read_text()
+    assert md.startswith("# Discrepancy analysis")
+    assert "| alpha_cubic_stiffness |" in md and "| fold |" in md
     assert (out / "figures" / "bifurcation_diagram.png").stat().st_size > 10_000
     assert (out / "figures" / "orbit_residuals.png").stat().st_size > 10_000
     # a second run into the same folder is refused
