@@ -304,12 +304,13 @@ def summary(seeds: list[int], infinite: bool = False) -> None:
                 ax.axhline(y, color="0.2", lw=0.8, ls="--", zorder=3)
             label = {"mu0": "μ0 (Hopf)", "mu_fold": "fold", "eta": "η"}[site]
             p_text = "< 0.001" if s["chi2_p"] < 1e-3 else f"= {s['chi2_p']:.3f}"
-            ax.set_title(f"{name.replace('_', ', ')}: {label}  (χ² p {p_text})", fontsize=9)
+            ax.set_title(f"{label}  (χ² p {p_text})", fontsize=9)
             ax.set_xticks([0, BINS // 2, BINS])
             ax.set_xticklabels(["0", "0.5", "1"])
             if r == len(runs) - 1:
                 ax.set_xlabel("rank of the truth among the draws")
-        axes[r, 0].set_ylabel(f"simulations (of {row['n']})")
+        run = name.replace("_inf", ", infinite width").replace("_", ", ")
+        axes[r, 0].set_ylabel(f"{run}\nsimulations (of {row['n']})", fontsize=9)
     fig.suptitle("Simulation-based calibration: ranks of the truth among 99 posterior draws "
                  "(solid: expected count; dashed: 99% range of a bin under uniform ranks)",
                  fontsize=9)
