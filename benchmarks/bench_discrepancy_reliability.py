@@ -34,8 +34,10 @@ the simulator's own parameters reproduces (:data:`ABSORBED`: the lagged moment,
 whose nearest parameters are the aerodynamic lag coefficients),
 ``parameters off`` naming none but those (the strict score without this, as
 before, is reported beside it). Of the
-verdicts of (a)–(c) stated with probability p, the number right per bin of p is
-compared with the binomial 90% band at the bin's mean stated p (bins of at least
+verdicts of (a)–(c) stated with probability p (the probability of the model the
+verdict names, ``model_probability``; the class's is tabled beside it), the number
+right per bin of p is compared with the binomial 90% band at the bin's mean stated p
+(bins of at least
 :data:`MIN_BIN` sets), and the mean log score of the stated class probabilities
 with that of the classes' prior frequencies (1/3 each); a verdict ``unexplained``
 on a set of (a)–(c) is wrong, at its stated probability.
@@ -158,8 +160,9 @@ IE_NEAREST = {
 #: ``parameters off`` naming none but those is a right answer for it.
 ABSORBED = ("lagged_pitch_moment",)
 
-#: Bins of the stated probability (the last one closed).
-BINS = ((1 / 3, 0.5), (0.5, 0.7), (0.7, 0.9), (0.9, 0.99), (0.99, 1.0))
+#: Bins of the stated probability (the last one closed); a class's probability is at
+#: least 1/3, a named model's may be less.
+BINS = ((0.0, 1 / 3), (1 / 3, 0.5), (0.5, 0.7), (0.7, 0.9), (0.9, 0.99), (0.99, 1.0))
 #: Bins with at least this many sets are tested against the binomial 90% band.
 MIN_BIN = 10
 #: The library's dissipative kinds (a negative coefficient there is not damping).
@@ -443,11 +446,40 @@ def set_row(r: dict) -> str:
             f"{'; '.join(holds) or '–'} | {_chi2(rep)} | {r['time_s']:.0f} s |")
 
 
-def reliability(sets: list[dict]) -> list[dict]:
+def stated(r: dict, which: str = "model") -> float:
+    """The probability a set's verdict states: of the model it names (``"model"``: the
+    one a set is scored on, since "right" for (c) asks for the planted term), or of its
+    class (``"class"``). Equal for ``none`` and ``parameters off``; files without the
+    model's probability give the class's."""
+    v = r["report"]["verdict"]
+    p = v.get("model_probability") if which == "model" else None
+    return float(v["probability"] if p is None else p)
+
+
+def _reliability_table(rel: list[dict]) -> list[str]:
+    """:func:`reliability`'s bins as a Markdown table."""
+    lines = ["| stated probability | n | mean stated | right | 90% band | P(≤ right) | "
+             "inside the band | right, class only |",
+             "|---|---:|---:|---:|---|---:|---|---:|"]
+    for b in rel:
+        lo, hi = b["bin"]
+        name = f"[{lo:.3g}, {hi:.3g}{']' if b['closed'] else ')'}"
+        if not b["n"]:
+            lines.append(f"| {name} | 0 | – | – | – | – | – | – |")
+            continue
+        ok = {None: f"(n < {MIN_BIN})", True: "yes", False: "**no**"}[b["ok"]]
+        lines.append(f"| {name} | {b['n']} | {b['mean_stated']:.3f} | {b['right']} | "
+                     f"{b['band'][0]}–{b['band'][1]} | {b['p_at_most']:.3g} | {ok} | "
+                     f"{b['right_class']} |")
+    return lines
+
+
+def reliability(sets: list[dict], which: str = "model") -> list[dict]:
     """Per bin of stated probability (classes (a)–(c)): n, mean stated, right, binomial band.
 
-    The band is the central 90% of Binomial(n, mean stated p) for the number right (bins
-    of at least :data:`MIN_BIN` sets are tested; ``ok`` is ``None`` below that).
+    ``which``: the stated probability, :func:`stated`'s. The band is the central 90% of
+    Binomial(n, mean stated p) for the number right (bins of at least :data:`MIN_BIN`
+    sets are tested; ``ok`` is ``None`` below that).
     """
     from scipy.stats import binom
 
@@ -455,12 +487,11 @@ def reliability(sets: list[dict]) -> list[dict]:
     scored = [r for r in sets if "report" in r and r["class"] != "independent effect"]
     for i, (lo, hi) in enumerate(BINS):
         last = i == len(BINS) - 1
-        inb = [r for r in scored if lo <= r["report"]["verdict"]["probability"]
-               and (r["report"]["verdict"]["probability"] < hi or last)]
+        inb = [r for r in scored if lo <= stated(r, which) and (stated(r, which) < hi or last)]
         n = len(inb)
         row = {"bin": [lo, hi], "closed": last, "n": n, "seeds": [r["seed"] for r in inb]}
         if n:
-            p = float(np.mean([r["report"]["verdict"]["probability"] for r in inb]))
+            p = float(np.mean([stated(r, which) for r in inb]))
             k = int(sum(bool(r["score"]["right"]) for r in inb))
             kc = int(sum(bool(r["score"]["class_right"]) for r in inb))
             band = [int(binom.ppf(0.05, n, p)), int(binom.ppf(0.95, n, p))]
@@ -555,25 +586,19 @@ def markdown(sets: list[dict], sources: list[str]) -> str:
         "",
         "## Reliability (classes a–c)",
         "",
-        "Stated probability: the verdict's class probability. Right: the number right. "
+        "Stated probability: the probability of the model the verdict names (the "
+        "verdict's `model_probability`; for `none` and `parameters off` that of the "
+        "class). Right: the number right. "
         f"Band: the central 90% of Binomial(n, mean stated) for the number right; tested "
         f"in bins of at least {MIN_BIN} sets. 'class only': the number whose class was "
         "right (for (c) without requiring the planted term among those named).",
         "",
-        "| stated probability | n | mean stated | right | 90% band | P(≤ right) | "
-        "inside the band | right, class only |",
-        "|---|---:|---:|---:|---|---:|---|---:|",
     ]
-    for b in rel:
-        lo, hi = b["bin"]
-        name = f"[{lo:.3g}, {hi:.3g}{']' if b['closed'] else ')'}"
-        if not b["n"]:
-            lines.append(f"| {name} | 0 | – | – | – | – | – | – |")
-            continue
-        ok = {None: f"(n < {MIN_BIN})", True: "yes", False: "**no**"}[b["ok"]]
-        lines.append(f"| {name} | {b['n']} | {b['mean_stated']:.3f} | {b['right']} | "
-                     f"{b['band'][0]}–{b['band'][1]} | {b['p_at_most']:.3g} | {ok} | "
-                     f"{b['right_class']} |")
+    lines += _reliability_table(rel)
+    lines += ["", "The same sets binned by the probability of the verdict's class (the "
+              "verdict's `probability`, which for (c) does not ask for the planted term):",
+              ""]
+    lines += _reliability_table(reliability(sets, "class"))
     ls = log_scores(sets)
     if ls:
         lines += ["", f"Log score (mean log of the probability stated for the true class, "

@@ -237,3 +237,16 @@ def test_parameters_off_and_a_term_missing_give_three_stages():
                                                               - true_fold)
     assert not d["mismatch"]["after"]["significant"]
     assert "## Fit: nominal, calibrated, calibrated + h_cubic_damping" in rep.to_markdown()
+
+
+def test_the_verdicts_heading_gives_the_named_models_probability_where_it_is_smaller():
+    """The class's probability is shared by every model of the class: where the verdict
+    names a term, the heading also gives that model's own (what the reliability study
+    scores, since a verdict counts right only when it names the planted term)."""
+    from bayeshopf.discrepancy.render import verdict_probability
+
+    term = {"probability": 0.99996, "model_probability": 0.5383}
+    assert verdict_probability(term) == "probability 1.00; 0.54 for the model named"
+    same = {"probability": 0.9419, "model_probability": 0.9419}      # parameters off
+    assert verdict_probability(same) == "probability 0.94"
+    assert verdict_probability({"probability": 0.97}) == "probability 0.97"   # older reports

@@ -30,6 +30,7 @@ from scipy import stats
 
 from bayeshopf.discrepancy.nested import CoefficientPosterior
 from bayeshopf.discrepancy.orbits import OrbitBatch
+from bayeshopf.discrepancy.render import verdict_probability
 from bayeshopf.discrepancy.select import Fitter
 from bayeshopf.discrepancy.terms import Term
 from bayeshopf.errors import BayesHopfError
@@ -391,7 +392,7 @@ class CalibrationReport:
     def summary(self) -> str:
         """The verdict, the calibrated parameters and the best terms, as plain text."""
         v = self.verdict
-        lines = [f"Verdict ({v['kind']}, probability {v['probability']:.2f}): {v['sentence']}",
+        lines = [f"Verdict ({v['kind']}, {verdict_probability(v)}): {v['sentence']}",
                  "", f"{'parameter':<10} {'nominal':>11} {'median':>11}   90% interval"
                  f"{'':<14} shift   off"]
         for p in self.calibration.parameters:

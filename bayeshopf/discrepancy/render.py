@@ -8,7 +8,22 @@ shared with the command's printout.
 
 from __future__ import annotations
 
-__all__ = ["STAGE_TITLES", "markdown", "stage_rows"]
+__all__ = ["STAGE_TITLES", "markdown", "stage_rows", "verdict_probability"]
+
+
+def verdict_probability(v: dict) -> str:
+    """``"probability P"`` of a verdict, and its named model's where that is smaller.
+
+    A verdict's ``probability`` is its class's, shared by every model of the class;
+    where the verdict names a term, the model it names has its own
+    ``model_probability`` (the class's less its rivals'), the number to read as how
+    sure the analysis is of the term it names.
+    """
+    out = f"probability {v['probability']:.2f}"
+    m = v.get("model_probability")
+    if m is not None and f"{m:.2f}" != f"{v['probability']:.2f}":
+        out += f"; {m:.2f} for the model named"
+    return out
 
 
 def markdown(d: dict) -> str:
@@ -179,7 +194,7 @@ def _bayes_markdown(v: dict) -> list[str]:
 def _markdown_calibrated(d: dict) -> str:
     """``report.md`` of an analysis with calibration."""
     v = d["verdict"]
-    prob = f", probability {v['probability']:.2f}" if v.get("probability") is not None else ""
+    prob = f", {verdict_probability(v)}" if v.get("probability") is not None else ""
     lines = [f"# Discrepancy analysis: {d['simulator']}", "",
              f"**Verdict ({v['kind']}{prob}).** {v['sentence']}", "",
              f"## Uncertain parameters ({d['parameters']['model']})", "",
