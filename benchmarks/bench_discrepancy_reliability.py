@@ -31,13 +31,12 @@ Right answers: (a) verdict ``none``; (b) ``parameters off``; (c) ``term missing`
 naming the planted term; (d) ``unexplained``, or ``term missing`` naming the
 nearest library term (:data:`IE_NEAREST`), or, for an effect that a change of
 the simulator's own parameters reproduces (:data:`ABSORBED`: the lagged moment,
-whose nearest parameters are the aerodynamic lag coefficients),
-``parameters off`` naming none but those (the strict score without this, as
-before, is reported beside it). Of the
-verdicts of (a)–(c) stated with probability p (the probability of the model the
-verdict names, ``model_probability``; the class's is tabled beside it), the number
-right per bin of p is compared with the binomial 90% band at the bin's mean stated p
-(bins of at least
+whose nearest parameters are the aerodynamic lag coefficients), ``parameters
+off`` naming none but those (the strict score without this, as before, is
+reported beside it). Of the verdicts of (a)–(c) stated with probability p (the
+probability of the model the verdict names, ``model_probability``; the class's
+is tabled beside it), the number right per bin of p is compared with the
+binomial 90% band at the bin's mean stated p (bins of at least
 :data:`MIN_BIN` sets), and the mean log score of the stated class probabilities
 with that of the classes' prior frequencies (1/3 each); a verdict ``unexplained``
 on a set of (a)–(c) is wrong, at its stated probability.
