@@ -390,7 +390,7 @@ def test_removed_and_misused_options_are_one_line_errors(good_data, tmp_path, ca
     assert "unrecognized arguments: --speed" in capsys.readouterr().err
     code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--nuts-check", "--quiet"])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "needs --inference svi" in err
+    assert code == 2 and len(err.splitlines()) == 1 and "needs --inference importance or svi" in err
     assert not (tmp_path / "o").exists()
 
 

@@ -40,13 +40,15 @@ def fit_groups(p: argparse.ArgumentParser) -> FitGroups:
 
 def add_fit_options(g: FitGroups) -> None:
     """The options ``fit`` and ``demo`` share, each in its section."""
-    g.inference.add_argument("--inference", choices=("nuts", "svi"), default="nuts",
-                             help="posterior: NUTS (default) or SVI with a full-rank Gaussian "
-                             "guide")
+    g.inference.add_argument("--inference", choices=("nuts", "importance", "svi"),
+                             default="nuts",
+                             help="posterior: NUTS (default); importance sampling from the "
+                             "MAP's Laplace approximation, Pareto-smoothed (NUTS where its "
+                             "check fails); or SVI with a full-rank Gaussian guide")
     g.inference.add_argument("--nuts-check", action="store_true",
-                             help="with --inference svi: also run NUTS on the same model and "
-                             "report whether SVI's 90%% intervals match NUTS's (summary.json "
-                             "'nuts_check')")
+                             help="with --inference importance or svi: also run NUTS on the "
+                             "same model and report whether the 90%% intervals match NUTS's "
+                             "(summary.json 'nuts_check')")
     g.inference.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     g.inference.add_argument("--fast", action="store_true",
                              help="short optimisation runs (smoke tests, CI); intervals less "
@@ -100,9 +102,10 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
         FitError: For options that do not go together or out of range, by flag.
         OutputError: When ``--out`` is not empty without ``--force``.
     """
-    if getattr(args, "nuts_check", False) and args.inference != "svi":
-        raise FitError("--nuts-check compares SVI with NUTS and needs --inference svi; got "
-                       "--inference nuts (the default), whose R̂ and ESS are reported anyway")
+    if getattr(args, "nuts_check", False) and args.inference == "nuts":
+        raise FitError("--nuts-check compares importance sampling or SVI with NUTS and needs "
+                       "--inference importance or svi; got --inference nuts (the default), "
+                       "whose R̂ and ESS are reported anyway")
     check_ci(args.ci, error=FitError)
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):

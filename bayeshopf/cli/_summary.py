@@ -128,6 +128,10 @@ def _print_diagnostics(summary: dict) -> None:
         draws = (f" × {post['draws_per_chain']} draws" if "draws_per_chain" in post else "")
         print(f"\nNUTS, {post['chains']} chains{draws}: R̂ ≤ {worst:.3f}, bulk ESS ≥ {ess:.0f} "
               f"for {', '.join(post['sites'])}; {post['divergences']} divergences")
+    elif post.get("method") == "importance":
+        print(f"\nimportance sampling from the MAP's Laplace approximation: Pareto k̂ "
+              f"{post['pareto_k']:.2f} (at most {post['k_max']}), {post['ess']:.0f} effective "
+              f"of {post['proposals']} draws")
     errs = [e["relative"] for e in diag["fit"]["orbit_error"] if e["relative"] is not None]
     if errs:
         print(f"orbit errors (posterior-median orbit against the measured mean orbit): "
@@ -159,11 +163,13 @@ def _print_nuts_check(summary: dict) -> None:
     chk = summary.get("nuts_check")
     if chk is None:
         return
+    method = {"importance": "importance sampling"}.get(
+        summary.get("diagnostics", {}).get("posterior", {}).get("method"), "SVI")
     for k, v in chk["sites"].items():
         lo, hi = v["reference"]
         a, b, c, d = format_values([lo, hi, *v["other"]], min(hi - lo, v["other"][1]
                                                               - v["other"][0]))
-        print(f"NUTS check {k}: NUTS [{a}, {b}], SVI [{c}, {d}]: ends differ by "
+        print(f"NUTS check {k}: NUTS [{a}, {b}], {method} [{c}, {d}]: ends differ by "
               f"{100 * v['end_gap_fraction']:.0f}% of NUTS's width "
               f"({'agree' if v['agree'] else 'DISAGREE'})")
 

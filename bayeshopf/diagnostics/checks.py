@@ -139,6 +139,8 @@ class Diagnostics:
         fit, post = d["fit"], d["posterior"]
         if post.get("method") == "svi":
             sampler_failed = not post["elbo_plateau"]["plateau"]
+        elif post.get("method") == "importance":       # its check passed, or NUTS ran instead
+            sampler_failed = False
         else:
             sampler_failed = (bool(post.get("divergences", 0))
                               or not all(v["ok"] for v in post["sites"].values()))

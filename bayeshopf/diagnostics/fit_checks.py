@@ -134,6 +134,12 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
                                 f"(max_samples {post.settings.max_samples})")
         if run.divergences:
             warnings.append(f"NUTS: {run.divergences} divergent transitions")
+        fell_back = run.sampler.get("importance")
+        if fell_back:
+            warnings.append(f"importance sampling: not used ({fell_back['fallback']}); the "
+                            "posterior is NUTS's")
+    elif run.method == "importance":
+        d["posterior"] = {"method": "importance", **run.sampler}
     else:
         pl = svi.elbo_plateau(run.losses)
         d["posterior"] = {"method": "svi", "elbo_plateau": pl, "steps": int(run.losses.size)}

@@ -246,6 +246,8 @@ def hybrid_summary(post) -> dict:
         # a single chain has no R̂: not checked, so not passed
         ok = ok and bool(sites) and all(v["ok"] for v in sites.values()) \
             and conv["divergences"] == 0
+    elif po.get("method") == "importance":
+        conv.update(pareto_k=po.get("pareto_k"), ess=po.get("ess"))
     elif po.get("method") == "svi":
         pl = po.get("elbo_plateau", {})
         conv.update(elbo_plateau=bool(pl.get("plateau", False)), steps=po.get("steps"))

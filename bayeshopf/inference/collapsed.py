@@ -16,7 +16,10 @@ over a handful of parameters: the normal form's gaps (and the unfolding's ``w``)
    chains started at the MAP point with the mass matrix started at the MAP's
    Laplace covariance, advanced in compiled chunks and extended while R̂ or
    bulk ESS (ArviZ) of a checked site fails, up to ``max_samples``
-   (:mod:`bayeshopf.inference.nuts`). ``"svi"``: a full-rank Gaussian
+   (:mod:`bayeshopf.inference.nuts`). ``"importance"``: draws from a Student-t
+   at the MAP point with its Laplace covariance, adapted once and weighted by
+   the posterior, Pareto-smoothed, NUTS where their check fails
+   (:mod:`bayeshopf.inference.importance`). ``"svi"``: a full-rank Gaussian
    autoguide started at the MAP point, with an ELBO-plateau test
    (:mod:`bayeshopf.inference.svi`).
 4. **Map draws.** For every posterior draw, one exact draw of the map's linear
@@ -43,7 +46,7 @@ from jax.flatten_util import ravel_pytree
 from bayeshopf import _preload
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.errors import FitError
-from bayeshopf.inference import devices, nuts, programs
+from bayeshopf.inference import devices, importance, nuts, programs
 from bayeshopf.inference.cache import (  # noqa: F401 (re-exported)
     compile_ahead,
     compiled_call,
@@ -89,16 +92,20 @@ from bayeshopf.inference.svi import (  # noqa: F401 (re-exported)
 )
 from bayeshopf.model import collapsed as cm
 
+#: The posterior's methods (``CollapsedSettings.inference``).
+METHODS = ("nuts", "importance", "svi")
+
 #: NUTS's and SVI's runs under their earlier names.
 _nuts, _svi = run_nuts, run_svi
 
 
 def compile_programs(inputs: ModelInputs, settings: CollapsedSettings) -> None:
-    """Start compiling the MAP's and NUTS's programs in the background, before the MAP.
+    """Start compiling the MAP's and the posterior's programs in the background, before the MAP.
 
     With an empty compilation cache most of a fit is XLA compiling, one program
     after another on one core, each when first called: the potential, NUTS's
-    start and advance, the map draws and the log-likelihood. All but NUTS's
+    start and advance (or importance sampling's potential and sites at many
+    draws), the map draws and the log-likelihood. All but NUTS's
     start (which holds the MAP point) are exported (or loaded) here and
     compiled in a background thread, on the other core, while this thread
     finds the MAP (:func:`~bayeshopf.inference.cache.compile_ahead`). Their
@@ -129,13 +136,22 @@ def compile_programs(inputs: ModelInputs, settings: CollapsedSettings) -> None:
                                    settings.num_chains), shapes)
     n = got["x"].shape[0]
     programs.potential_program(inputs, n, ahead=True)
-    if not is_nuts:
-        return
-    where = devices.placement(n_dev)
-    states = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=where) for a in got["states"]]
-    nuts.nuts_advance(inputs, settings, n, n_dev, states, ahead=True)
-    keys = jax.ShapeDtypeStruct((draws, 2), jnp.uint32)
     key = programs.model_key(inputs)
+    if settings.inference == "importance":
+        info, unravel, potential = programs.model_functions(inputs)
+        devices.mapped_call("potential-draws", potential,
+                            jax.ShapeDtypeStruct((importance.PROPOSALS, n), jnp.float64),
+                            key=key, ahead=True)
+        devices.mapped_call("constrain-draws", lambda xi: info.postprocess_fn(unravel(xi)),
+                            jax.ShapeDtypeStruct((draws, n), jnp.float64), key=key, ahead=True)
+    elif not is_nuts:
+        return
+    else:
+        where = devices.placement(n_dev)
+        states = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=where)
+                  for a in got["states"]]
+        nuts.nuts_advance(inputs, settings, n, n_dev, states, ahead=True)
+    keys = jax.ShapeDtypeStruct((draws, 2), jnp.uint32)
     devices.mapped_call("maps", _map_draw(inputs), (got["theta"], keys), key=key, ahead=True)
     devices.mapped_call("loglik", _pointwise(inputs), got["theta"], key=key, ahead=True)
 
@@ -198,7 +214,8 @@ class PosteriorRun:
     """The posterior stage's raw result (immutable).
 
     Attributes:
-        method: ``"nuts"`` or ``"svi"``.
+        method: ``"nuts"``, ``"importance"`` or ``"svi"`` (``"nuts"`` where
+            importance sampling fell back to it).
         chains: Draws of every site, ``(n_chains, n_draws, ...)`` (SVI: one chain).
         betas: Map coefficients, one exact draw per posterior draw, ``(n, J, 2)``.
         gammas: Frequency coefficients, one exact draw per posterior draw, ``(n, 4)``,
@@ -208,7 +225,9 @@ class PosteriorRun:
         seconds: Wall time of the stage.
         sampler: NUTS: how the mass matrix started (``"laplace"`` or ``"identity"``)
             and the mean leapfrog steps per iteration in warm-up and in the draws
-            (the stage's cost, whatever the machine's load); empty for SVI.
+            (the stage's cost, whatever the machine's load); importance
+            sampling: its check (:func:`~bayeshopf.inference.importance.run_importance`),
+            under ``"importance"`` after a fallback to NUTS; empty for SVI.
     """
 
     method: str
@@ -233,18 +252,25 @@ def sample_posterior(inputs: ModelInputs, map_point: MapPoint,
     """NUTS or SVI from the MAP point, then one exact map draw per posterior draw."""
     ensure_x64()
     method = method or settings.inference
-    if method not in ("nuts", "svi"):
-        raise FitError(f"inference must be 'nuts' or 'svi'; got {method!r}")
+    if method not in METHODS:
+        raise FitError(f"inference must be one of {', '.join(map(repr, METHODS))}; "
+                       f"got {method!r}")
     k_post, k_map = jax.random.split(jax.random.PRNGKey(seed))
     t0 = time.perf_counter()
     if progress:
         what = (f"{settings.num_chains} chains × {settings.num_warmup} + {settings.num_samples} "
                 f"steps, up to {settings.max_samples} draws while R̂ or ESS fails"
-                if method == "nuts" else f"{settings.svi_steps} steps")
+                if method == "nuts" else f"{settings.svi_steps} steps" if method == "svi" else
+                f"{3 * importance.PROPOSALS} draws from the MAP's Laplace approximation, "
+                "NUTS if their check fails")
         print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
     sampler = {}
     if method == "nuts":   # run_nuts starts the imports once its first chunk is dispatched
         chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, k_post, progress)
+        losses = np.zeros(0)
+    elif method == "importance":
+        method, chains, div, sampler = importance.run_importance(inputs, map_point, settings,
+                                                                 k_post, progress)
         losses = np.zeros(0)
     else:
         _preload.start()   # ArviZ (R̂ and ESS, posterior.nc) imports while SVI runs

@@ -59,8 +59,11 @@ class CollapsedSettings:
             curvature) or ``"window"`` (that curve with a window of learned depth
             and width in its curvature at the fold; both
             :mod:`bayeshopf.model.horizontal`, subcritical only).
-        inference: ``"nuts"`` (default) or ``"svi"``.
-        num_chains: NUTS chains.
+        inference: ``"nuts"`` (default), ``"importance"`` (draws from the MAP's
+            Laplace approximation weighted by the posterior, NUTS where their
+            check fails; :mod:`bayeshopf.inference.importance`) or ``"svi"``.
+        num_chains: NUTS chains (and, times ``num_samples``, the draws that
+            importance sampling returns).
         num_warmup: NUTS warm-up steps per chain.
         num_samples: NUTS draws per chain before the first convergence check.
         extend_samples: Draws per chain added while a checked site fails R̂ or

@@ -1,0 +1,138 @@
+r"""Importance sampling from the MAP's Laplace approximation, Pareto-smoothed, NUTS where it fails.
+
+The collapsed model leaves a dozen nonlinear parameters, whose posterior is
+close to Gaussian around the MAP. Draws from a multivariate Student-t proposal
+``q`` there, weighted by ``w ∝ p(x | y) / q(x)`` (the potential at each
+draw, no gradient), estimate the posterior; Pareto smoothing of the largest
+weights (PSIS, Vehtari, Simpson, Gelman, Yao & Gabry 2024, ArviZ's
+``psislw``) stabilises the estimate and its shape :math:`\hat k` says whether
+it can be trusted.
+
+1. **Round 1**: :data:`PROPOSALS` draws from ``t_ν(x̂, Σ_L)``, the MAP ``x̂``
+   and its Laplace covariance ``Σ_L``
+   (:func:`~bayeshopf.inference.optimum.laplace_covariance`), ``ν =``
+   :data:`DF`.
+2. **Round 2**: ``2 ×`` :data:`PROPOSALS` draws from ``t_ν(m, c Σ)``, the
+   smoothed-weight mean and covariance of round 1, ``c =``
+   :data:`INFLATION`; their weights are the estimate.
+3. **Check**: :math:`\hat k ≤` :data:`K_MAX` (above it the estimate's error
+   falls too slowly with the draws, Vehtari et al. 2024, §3) and Kish's
+   effective sample size ``1/Σw²`` at least
+   :data:`~bayeshopf.inference.nuts.ESS_MIN`. Where either fails, or the
+   Laplace covariance does not exist, the posterior is NUTS's
+   (:func:`~bayeshopf.inference.nuts.run_nuts`) and the reason is kept.
+4. **Draws**: ``num_chains · num_samples`` draws resampled from round 2 by
+   their smoothed weights (multinomial), returned as one chain.
+
+The potential is evaluated one draw after another on each device
+(:func:`~bayeshopf.inference.devices.mapped_call`), the draws split over the
+process's devices; every round calls one stored program.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+from scipy.stats import multivariate_t
+
+from bayeshopf import _preload
+from bayeshopf.inference import devices, nuts, optimum, programs
+from bayeshopf.inference.optimum import MapPoint
+from bayeshopf.inference.settings import CollapsedSettings, ModelInputs
+
+#: Draws per call of the potential's program (round 1 makes one call, round 2 two).
+PROPOSALS = 4000
+#: Degrees of freedom of the Student-t proposals (heavier tails than the posterior's).
+DF = 4.0
+#: Round 2's covariance: round 1's weighted covariance times this.
+INFLATION = 1.1
+#: Largest Pareto shape k̂ of the weights accepted (Vehtari et al. 2024: 0.7).
+K_MAX = 0.7
+
+
+def _psis(log_w: np.ndarray) -> tuple[np.ndarray, float]:
+    """Normalised Pareto-smoothed weights and their shape k̂ (ArviZ's ``psislw``)."""
+    with warnings.catch_warnings():   # the 0.2x series announces its 1.x refactor on import
+        warnings.simplefilter("ignore", FutureWarning)
+        import arviz as az
+
+    lw = np.asarray(log_w, dtype=float)
+    ok = np.isfinite(lw)
+    if not ok.any():
+        return np.full(lw.shape, 1.0 / lw.size), np.inf
+    lw = np.where(ok, lw, lw[ok].min() - 800.0)      # a draw the model rejects: weight 0
+    smoothed, k = az.psislw(lw - lw.max())
+    w = np.exp(smoothed - smoothed.max())
+    return w / w.sum(), float(k)
+
+
+def _round(potential, x0, cov, n_calls: int, rng) -> tuple[np.ndarray, np.ndarray, float]:
+    """``n_calls · PROPOSALS`` draws from ``t_ν(x0, cov)``: ``(draws, weights, k̂)``."""
+    q = multivariate_t(loc=x0, shape=cov, df=DF, allow_singular=False)
+    x = q.rvs(size=n_calls * PROPOSALS, random_state=rng).reshape(-1, x0.size)
+    u = np.concatenate([np.asarray(potential(jnp.asarray(c)))
+                        for c in np.split(x, n_calls)])
+    w, k = _psis(-u - q.logpdf(x))
+    return x, w, k
+
+
+def _draws_of(inputs: ModelInputs, x: np.ndarray) -> dict:
+    """Every site (the deterministic ones too) at the flat unconstrained draws ``x``."""
+    info, unravel, _ = programs.model_functions(inputs)
+    out = devices.mapped_call("constrain-draws", lambda xi: info.postprocess_fn(unravel(xi)),
+                              jnp.asarray(x), key=programs.model_key(inputs))
+    return {k: np.asarray(v)[None] for k, v in out.items() if not k.startswith("marginal")}
+
+
+def run_importance(inputs: ModelInputs, map_point: MapPoint, settings: CollapsedSettings,
+                   key, progress: bool):
+    """The posterior by importance sampling, or NUTS's where its check fails.
+
+    Returns:
+        ``(method, chains, divergences, sampler)``: ``method`` is
+        ``"importance"`` (``chains`` one chain of ``num_chains · num_samples``
+        resampled draws) or ``"nuts"`` (:func:`~bayeshopf.inference.nuts.run_nuts`'s);
+        ``sampler`` holds the check (``pareto_k``, ``pareto_k_first``,
+        ``ess``, ``proposals``) and, after a fallback, ``fallback``, the reason.
+    """
+    x0 = np.asarray(ravel_pytree({k: jnp.asarray(v)
+                                  for k, v in map_point.unconstrained.items()})[0])
+    n = x0.size
+    cov, laplace = optimum.laplace_covariance(programs.potential_program(inputs, n), x0)
+    _preload.start()   # ArviZ (PSIS, R̂ and ESS, posterior.nc) imports beside the first round
+    info, unravel, potential = programs.model_functions(inputs)
+    mkey = programs.model_key(inputs)
+
+    def potential_draws(x):
+        return devices.mapped_call("potential-draws", potential, x, key=mkey)
+
+    seed = np.asarray(key, dtype=np.uint32).ravel()
+    rng = np.random.default_rng(seed.tolist())
+    check = {"proposals": 3 * PROPOSALS, "df": DF, "k_max": K_MAX}
+    if laplace:
+        x, w, k1 = _round(potential_draws, x0, cov, 1, rng)
+        mean = w @ x
+        c = np.cov(x.T, aweights=w) * INFLATION
+        try:
+            np.linalg.cholesky(c)
+        except np.linalg.LinAlgError:
+            c = cov
+        x, w, k = _round(potential_draws, mean, c, 2, rng)
+        ess = float(1.0 / np.sum(w**2))
+        check.update(pareto_k_first=k1, pareto_k=k, ess=ess)
+        if k <= K_MAX and ess >= nuts.ESS_MIN:
+            idx = rng.choice(x.shape[0], size=settings.num_chains * settings.num_samples, p=w)
+            return "importance", _draws_of(inputs, x[idx]), 0, check
+        reason = (f"Pareto k̂ {k:.2f} (at most {K_MAX} accepted)" if k > K_MAX else
+                  f"effective draws {ess:.0f} (at least {nuts.ESS_MIN} needed)")
+    else:
+        reason = "the MAP's Hessian is not positive definite"
+    if progress:
+        print(f"posterior: importance sampling not used ({reason}); NUTS instead",
+              file=sys.stderr)
+    chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, key, progress)
+    return "nuts", chains, div, {**sampler, "importance": {**check, "fallback": reason}}
