@@ -6,6 +6,8 @@
     python benchmarks/bench_sbc.py --summary        # table and rank histograms
     python benchmarks/bench_sbc.py --design paired --seeds 2000-2199 --pipeline --nn-width inf
     python benchmarks/bench_sbc.py --summary --seeds 2000-2199 --nn-width inf
+    python benchmarks/bench_sbc.py --design paired --seeds 2200-2399 --pipeline --nn-width inf \
+        --inference importance
 
 Each simulation draws a data set from the model's prior
 (:func:`bayeshopf.model.prior_predictive.draw_data`) at one design, fits it with
@@ -46,12 +48,17 @@ diagnosis) takes the same noise-free coefficients, only moves each
 recording's time origin to its crest as the features do, and adds the
 design's measurement noise to the coefficients: what the alignment alone does.
 
+**Importance sampling** (``--inference importance``): the package's
+importance sampling from the MAP's Laplace approximation instead of the
+benchmark's NUTS (:func:`make_importance_runner`), NUTS where its check fails.
+
 Writes one JSON line per simulation to
-``benchmarks/results/sbc_<design>[_inf][_pipeline[_D s]].jsonl`` (appended, so
+``benchmarks/results/sbc_<design>[_inf][_pipeline[_D s]][_is].jsonl`` (appended, so
 that a run can be stopped and resumed); ``--summary`` reads them, updates their
 rows of ``benchmarks/sbc.json`` (the tables ``docs/inference.md`` quotes;
 rows of runs whose results are not here are kept) and draws
-``docs/sbc_ranks.png`` (``docs/sbc_ranks_inf.png`` with ``--nn-width inf``).
+``docs/sbc_ranks.png`` (``docs/sbc_ranks_inf.png`` with ``--nn-width inf``, with
+``_is`` before ``.png`` where every run shown is importance sampling's).
 """
 
 from __future__ import annotations
@@ -180,6 +187,76 @@ def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
     return run
 
 
+def make_importance_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
+    """The package's importance sampling on new data of the design's shape (``--inference``).
+
+    As :func:`~bayeshopf.inference.importance.run_importance` does it, with the
+    data as traced arguments (one compilation per design): the MAP by SciPy's
+    L-BFGS-B from the package's deterministic start values, its Laplace
+    covariance (:func:`~bayeshopf.inference.optimum.laplace_covariance`), then
+    :func:`~bayeshopf.inference.importance.importance_draws` (2,000 draws
+    resampled, stored as two chains of 1,000 for the file's shape); where its
+    check fails, :func:`make_runner`'s NUTS. The record's ``method`` says
+    which, ``pareto_k`` and ``ess`` the check.
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax.flatten_util import ravel_pytree
+    from numpyro.infer import init_to_value
+    from numpyro.infer.util import initialize_model
+    from scipy.optimize import minimize
+
+    from bayeshopf.inference import importance
+    from bayeshopf.inference.optimum import laplace_covariance
+    from bayeshopf.inference.programs import _initial_values
+    from bayeshopf.model import collapsed as cm
+
+    def model(mu, sign, coeffs, coeffs_se, omega, omega_se):
+        cm.collapsed_model(spec, mu, sign, coeffs, coeffs_se, omega, omega_se)
+
+    shape = (len(mu), 2, 2 * spec.n_harmonics + 1)
+    example = (jnp.asarray(mu), jnp.asarray(sign), jnp.zeros(shape), jnp.asarray(se),
+               jnp.full(len(mu), spec.omega_centre), jnp.asarray(omega_se))
+    info = initialize_model(jax.random.PRNGKey(0), model, model_args=example,
+                            init_strategy=init_to_value(values=_initial_values(spec)),
+                            dynamic_args=True, validate_grad=False)
+    x_start, unravel = ravel_pytree(info.param_info.z)
+    post = info.postprocess_fn(*example)       # the sites' transforms do not read the data
+
+    def potential(x, data):
+        return info.potential_fn(*data)(unravel(x))
+
+    vg = jax.jit(jax.value_and_grad(potential))
+    batch = jax.jit(lambda xs, data: jax.lax.map(lambda x: potential(x, data), xs))
+    sites = jax.jit(lambda xs: jax.lax.map(lambda x: post(unravel(x)), xs))
+    nuts_run = make_runner(spec, mu, sign, se, omega_se, warmup, samples)
+
+    def run(key, *data):
+        data = tuple(jnp.asarray(a) for a in data)
+
+        def fun(x):
+            v, g = vg(jnp.asarray(x), data)
+            return float(v), np.asarray(g, dtype=float)
+
+        res = minimize(fun, np.asarray(x_start), jac=True, method="L-BFGS-B",
+                       options={"maxiter": 300})
+        cov, ok = laplace_covariance(lambda x: vg(x, data), res.x)
+        seed = np.asarray(key, dtype=np.uint32).ravel().tolist()
+        check = {"fallback": "the MAP's Hessian is not positive definite"}
+        if ok:
+            x, check = importance.importance_draws(lambda xs: batch(xs, data), res.x, cov, 2000,
+                                                   np.random.default_rng(seed))
+            if x is not None:
+                out = sites(jnp.asarray(x))
+                chains = {k: np.asarray(v).reshape((2, 1000) + v.shape[1:])
+                          for k, v in out.items()}
+                return chains, 0, {"method": "importance", **check}
+        chains, div = nuts_run(key, *data)
+        return chains, div, {"method": "nuts", **check}
+
+    return run
+
+
 def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
         duration: float | None = None, aligned: bool = False) -> dict:
     """One simulation: draw, (through the pipeline, or only aligned,) fit, rank."""
@@ -206,7 +283,8 @@ def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
         d = draw_data(spec, mu, sign, se, key, omega_se=omega_se)
         data = (d.coeffs, se, d.omega, omega_se)
     t0 = time.perf_counter()
-    chains, div = run(jax.random.PRNGKey(10**6 + seed), mu, sign, *data)
+    out = run(jax.random.PRNGKey(10**6 + seed), mu, sign, *data)
+    chains, div, how = out if len(out) == 3 else (*out, {"method": "nuts"})
     wall = time.perf_counter() - t0
     pooled = {k: np.asarray(v).reshape(-1) for k, v in chains.items() if k in SITES}
     n = next(iter(pooled.values())).size
@@ -216,14 +294,15 @@ def one(seed: int, spec, features, recordings, run, pipeline: bool = False,
     rhat = max(r for r, _ in conv.values())
     ess = min(e for _, e in conv.values())
     return {"seed": seed, "ranks": ranks, "truth": {k: float(d.theta[k]) for k in pooled},
-            "divergences": div, "rhat_max": rhat, "ess_min": ess, "wall_s": wall}
+            "divergences": div, "rhat_max": rhat, "ess_min": ess, "wall_s": wall, **how}
 
 
 def results_path(name: str, pipeline: bool, duration: float | None, aligned: bool = False,
-                 nn_width: int | None = 16) -> Path:
-    """``benchmarks/results/sbc_<design>[_inf][_pipeline[_<D>s] | _aligned].jsonl``."""
+                 nn_width: int | None = 16, inference: str = "nuts") -> Path:
+    """``benchmarks/results/sbc_<design>[_inf][_pipeline[_<D>s] | _aligned][_is].jsonl``."""
     tag = ("_aligned" if aligned else "" if not pipeline
            else "_pipeline" + ("" if duration is None else f"_{duration:g}s"))
+    tag += "_is" if inference == "importance" else ""
     return RESULTS_DIR / f"sbc_{name}{'_inf' if nn_width is None else ''}{tag}.jsonl"
 
 
@@ -234,14 +313,16 @@ def parse_seeds(s: str) -> list[int]:
 
 def run_design(name: str, seeds: list[int], warmup: int, samples: int,
                pipeline: bool = False, duration: float | None = None,
-               aligned: bool = False, nn_width: int | None = 16) -> None:
+               aligned: bool = False, nn_width: int | None = 16,
+               inference: str = "nuts") -> None:
     from bayeshopf._x64 import ensure_x64
 
     ensure_x64()
     spec, f, rs = design(name, nn_width)
     sign = np.where(f.unstable, -1.0, 1.0)
-    run = make_runner(spec, f.mu, sign, f.coeffs_se, f.omega_se, warmup, samples)
-    out = results_path(name, pipeline, duration, aligned, nn_width)
+    runner = make_importance_runner if inference == "importance" else make_runner
+    run = runner(spec, f.mu, sign, f.coeffs_se, f.omega_se, warmup, samples)
+    out = results_path(name, pipeline, duration, aligned, nn_width, inference)
     out.parent.mkdir(parents=True, exist_ok=True)
     done = set()
     if out.exists():
@@ -252,11 +333,13 @@ def run_design(name: str, seeds: list[int], warmup: int, samples: int,
         rec = one(seed, spec, f, rs, run, pipeline, duration, aligned)
         rec.update(design=name, warmup=warmup, samples=samples, pipeline=pipeline,
                    duration=duration, aligned=aligned, nn_width=nn_width)
+        rec.setdefault("method", "nuts")
         with out.open("a") as fh:
             fh.write(json.dumps(rec) + "\n")
         print(f"sbc {out.stem}: seed {seed}: ranks mu0 {rec['ranks']['mu0']} fold "
               f"{rec['ranks']['mu_fold']} eta {rec['ranks']['eta']}; R̂ {rec['rhat_max']:.3f}, "
-              f"{rec['divergences']} divergent, {rec['wall_s']:.1f} s", file=sys.stderr, flush=True)
+              f"{rec['divergences']} divergent, {rec['method']}, {rec['wall_s']:.1f} s",
+              file=sys.stderr, flush=True)
 
 
 def summary(seeds: list[int], infinite: bool = False) -> None:
@@ -285,6 +368,9 @@ def summary(seeds: list[int], infinite: bool = False) -> None:
                "rhat_above_1.01": sum(x["rhat_max"] > 1.01 for x in recs),
                "with_divergences": sum(x["divergences"] > 0 for x in recs),
                "median_wall_s": float(np.median([x["wall_s"] for x in recs])), "sites": {}}
+        if name.endswith("_is"):        # importance sampling, or NUTS where its check failed
+            row["importance_used"] = sum(x.get("method") == "importance" for x in recs)
+            row["pareto_k_max"] = max(x.get("pareto_k", np.nan) for x in recs)
         for site in SITES:
             ranks = np.array([x["ranks"][site] for x in recs if site in x["ranks"]])
             counts = np.bincount(ranks * BINS // (L_DRAWS + 1), minlength=BINS)
@@ -309,13 +395,15 @@ def summary(seeds: list[int], infinite: bool = False) -> None:
             ax.set_xticklabels(["0", "0.5", "1"])
             if r == len(runs) - 1:
                 ax.set_xlabel("rank of the truth among the draws")
-        run = name.replace("_inf", ", infinite width").replace("_", ", ")
+        run = (name.replace("_inf", ", infinite width").replace("_is", ", importance")
+               .replace("_", ", "))
         axes[r, 0].set_ylabel(f"{run}\nsimulations (of {row['n']})", fontsize=9)
     fig.suptitle("Simulation-based calibration: ranks of the truth among 99 posterior draws "
                  "(solid: expected count; dashed: 99% range of a bin under uniform ranks)",
                  fontsize=9)
     fig.tight_layout()
-    fig.savefig(ROOT / "docs" / f"sbc_ranks{'_inf' if infinite else ''}.png", dpi=110)
+    is_only = "_is" if all(n.endswith("_is") for n, _ in runs) else ""
+    fig.savefig(ROOT / "docs" / f"sbc_ranks{'_inf' if infinite else ''}{is_only}.png", dpi=110)
     path = Path(__file__).with_name("sbc.json")
     kept = json.loads(path.read_text()) if path.exists() else {}
     atomic_write(path, json.dumps({**kept, **table}, indent=1) + "\n")
@@ -340,6 +428,9 @@ def main() -> None:
                     help="coefficients only moved to the crest's time origin (no time series)")
     ap.add_argument("--nn-width", default="16",
                     help="hidden units of the map's network, or 'inf' for its infinite width")
+    ap.add_argument("--inference", choices=("nuts", "importance"), default="nuts",
+                    help="the posterior: the benchmark's NUTS, or the package's importance "
+                    "sampling (NUTS where its check fails)")
     ap.add_argument("--summary", action="store_true")
     a = ap.parse_args()
     nn_width = None if a.nn_width == "inf" else int(a.nn_width)
@@ -351,7 +442,7 @@ def main() -> None:
         if a.aligned and a.pipeline:
             ap.error("--aligned and --pipeline are two different runs; give one")
         run_design(a.design, parse_seeds(a.seeds), a.warmup, a.samples, a.pipeline, a.duration,
-                   a.aligned, nn_width)
+                   a.aligned, nn_width, a.inference)
     else:
         ap.error("--design or --summary expected")
 

@@ -73,8 +73,8 @@ def _psis(log_w: np.ndarray) -> tuple[np.ndarray, float]:
 def _round(potential, x0, cov, n_calls: int, rng) -> tuple[np.ndarray, np.ndarray, float]:
     """``n_calls · PROPOSALS`` draws from ``t_ν(x0, cov)``: ``(draws, weights, k̂)``."""
     q = multivariate_t(loc=x0, shape=cov, df=DF, allow_singular=False)
-    x = q.rvs(size=n_calls * PROPOSALS, random_state=rng).reshape(-1, x0.size)
-    u = np.concatenate([np.asarray(potential(jnp.asarray(c)))
+    x = q.rvs(size=n_calls * PROPOSALS, random_state=rng).reshape(-1, np.size(x0))
+    u = np.concatenate([np.asarray(potential(jnp.asarray(c)), dtype=float)
                         for c in np.split(x, n_calls)])
     w, k = _psis(-u - q.logpdf(x))
     return x, w, k
@@ -88,51 +88,70 @@ def _draws_of(inputs: ModelInputs, x: np.ndarray) -> dict:
     return {k: np.asarray(v)[None] for k, v in out.items() if not k.startswith("marginal")}
 
 
+def importance_draws(potential, x0, cov, n_out: int, rng) -> tuple[np.ndarray | None, dict]:
+    """Rounds 1 and 2 and the check (module docstring) on any potential.
+
+    Args:
+        potential: Flat points ``(PROPOSALS, n)`` ↦ their potentials ``(PROPOSALS,)``
+            (the negative log posterior up to a constant; ``inf`` or NaN where
+            the model has none).
+        x0: The mode, ``(n,)``.
+        cov: The Laplace covariance there, ``(n, n)``.
+        n_out: Draws to resample.
+        rng: NumPy's random generator.
+
+    Returns:
+        ``(draws, check)``: ``draws`` ``(n_out, n)`` resampled by the smoothed
+        weights, or ``None`` where the check fails; ``check`` holds
+        ``pareto_k_first`` (round 1's k̂), ``pareto_k``, ``ess``, ``proposals``,
+        ``df``, ``k_max``, and after a failure ``fallback``, the reason.
+    """
+    check = {"proposals": 3 * PROPOSALS, "df": DF, "k_max": K_MAX}
+    x, w, k1 = _round(potential, x0, cov, 1, rng)
+    mean = w @ x
+    c = np.cov(x.T, aweights=w) * INFLATION
+    try:
+        np.linalg.cholesky(c)
+    except np.linalg.LinAlgError:        # round 1's weights on too few draws: its own start
+        mean, c = x0, cov
+    x, w, k = _round(potential, mean, c, 2, rng)
+    ess = float(1.0 / np.sum(w**2))
+    check.update(pareto_k_first=k1, pareto_k=k, ess=ess)
+    if k > K_MAX:
+        return None, {**check, "fallback": f"Pareto k̂ {k:.2f} (at most {K_MAX} accepted)"}
+    if ess < nuts.ESS_MIN:
+        return None, {**check, "fallback": f"effective draws {ess:.0f} (at least "
+                                           f"{nuts.ESS_MIN} needed)"}
+    return x[rng.choice(x.shape[0], size=n_out, p=w)], check
+
+
 def run_importance(inputs: ModelInputs, map_point: MapPoint, settings: CollapsedSettings,
                    key, progress: bool):
-    """The posterior by importance sampling, or NUTS's where its check fails.
+    """The posterior by importance sampling (:func:`importance_draws`), or NUTS's where it fails.
 
     Returns:
         ``(method, chains, divergences, sampler)``: ``method`` is
         ``"importance"`` (``chains`` one chain of ``num_chains · num_samples``
-        resampled draws) or ``"nuts"`` (:func:`~bayeshopf.inference.nuts.run_nuts`'s);
-        ``sampler`` holds the check (``pareto_k``, ``pareto_k_first``,
-        ``ess``, ``proposals``) and, after a fallback, ``fallback``, the reason.
+        resampled draws, ``sampler`` the check) or ``"nuts"``
+        (:func:`~bayeshopf.inference.nuts.run_nuts`'s, with the failed check
+        under ``sampler["importance"]``).
     """
     x0 = np.asarray(ravel_pytree({k: jnp.asarray(v)
                                   for k, v in map_point.unconstrained.items()})[0])
-    n = x0.size
-    cov, laplace = optimum.laplace_covariance(programs.potential_program(inputs, n), x0)
+    cov, laplace = optimum.laplace_covariance(programs.potential_program(inputs, x0.size), x0)
     _preload.start()   # ArviZ (PSIS, R̂ and ESS, posterior.nc) imports beside the first round
-    info, unravel, potential = programs.model_functions(inputs)
-    mkey = programs.model_key(inputs)
-
-    def potential_draws(x):
-        return devices.mapped_call("potential-draws", potential, x, key=mkey)
-
-    seed = np.asarray(key, dtype=np.uint32).ravel()
-    rng = np.random.default_rng(seed.tolist())
-    check = {"proposals": 3 * PROPOSALS, "df": DF, "k_max": K_MAX}
+    potential, mkey = programs.model_functions(inputs)[2], programs.model_key(inputs)
+    rng = np.random.default_rng(np.asarray(key, dtype=np.uint32).ravel().tolist())
     if laplace:
-        x, w, k1 = _round(potential_draws, x0, cov, 1, rng)
-        mean = w @ x
-        c = np.cov(x.T, aweights=w) * INFLATION
-        try:
-            np.linalg.cholesky(c)
-        except np.linalg.LinAlgError:
-            c = cov
-        x, w, k = _round(potential_draws, mean, c, 2, rng)
-        ess = float(1.0 / np.sum(w**2))
-        check.update(pareto_k_first=k1, pareto_k=k, ess=ess)
-        if k <= K_MAX and ess >= nuts.ESS_MIN:
-            idx = rng.choice(x.shape[0], size=settings.num_chains * settings.num_samples, p=w)
-            return "importance", _draws_of(inputs, x[idx]), 0, check
-        reason = (f"Pareto k̂ {k:.2f} (at most {K_MAX} accepted)" if k > K_MAX else
-                  f"effective draws {ess:.0f} (at least {nuts.ESS_MIN} needed)")
+        x, check = importance_draws(
+            lambda x: devices.mapped_call("potential-draws", potential, x, key=mkey),
+            x0, cov, settings.num_chains * settings.num_samples, rng)
+        if x is not None:
+            return "importance", _draws_of(inputs, x), 0, check
     else:
-        reason = "the MAP's Hessian is not positive definite"
+        check = {"fallback": "the MAP's Hessian is not positive definite"}
     if progress:
-        print(f"posterior: importance sampling not used ({reason}); NUTS instead",
+        print(f"posterior: importance sampling not used ({check['fallback']}); NUTS instead",
               file=sys.stderr)
     chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, key, progress)
-    return "nuts", chains, div, {**sampler, "importance": {**check, "fallback": reason}}
+    return "nuts", chains, div, {**sampler, "importance": check}
