@@ -69,10 +69,10 @@ def summary(seeds: list[int]) -> None:
     print("|---|---:|---|---:|---:|---:|---:|---:|---|---:|---|")
     for r in sorted(recs, key=lambda r: (r["model"], r["seed"])):
         g = {k: f"{100 * v['end_gap_fraction']:.0f}%" for k, v in r["sites"].items()}
-        c = r["check"]
+        c, nan = r["check"], float("nan")
         rhat = max(v["r_hat"] for v in r["nuts_convergence"].values())
-        print(f"| {r['model']} | {r['seed']} | {r['method']} | {c.get('pareto_k', float('nan')):.2f} "
-              f"| {c.get('ess', float('nan')):.0f} | {g['mu0']} | {g['a2']} | {g['mu_fold']} "
+        print(f"| {r['model']} | {r['seed']} | {r['method']} | {c.get('pareto_k', nan):.2f} "
+              f"| {c.get('ess', nan):.0f} | {g['mu0']} | {g['a2']} | {g['mu_fold']} "
               f"| {'yes' if r['agree'] else 'no'} | {rhat:.3f} | {r['posterior_s']:.1f} / "
               f"{r['nuts_s']:.1f} |")
 

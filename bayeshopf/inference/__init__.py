@@ -4,7 +4,9 @@
 names: the settings (:mod:`~bayeshopf.inference.settings`), the model's compiled
 programs (:mod:`~bayeshopf.inference.programs`), the deterministic start, MAP
 and Laplace covariance (:mod:`~bayeshopf.inference.optimum`), NUTS
-(:mod:`~bayeshopf.inference.nuts`), SVI (:mod:`~bayeshopf.inference.svi`), the
+(:mod:`~bayeshopf.inference.nuts`), importance sampling from the Laplace
+approximation (:mod:`~bayeshopf.inference.importance`), SVI
+(:mod:`~bayeshopf.inference.svi`), the
 devices items are spread over (:mod:`~bayeshopf.inference.devices`) and the
 compiled-program cache (:mod:`~bayeshopf.inference.cache`).
 :mod:`~bayeshopf.inference.channels` fits further channels against a fit.
