@@ -130,3 +130,17 @@ def test_a_failed_check_runs_nuts_and_says_why(demo_importance, monkeypatch):
         inputs, fit.map_point, fit.settings, jnp.array([0, 7], dtype=jnp.uint32), False)
     assert called and method == "nuts" and chains["mu0"].shape == (2, 3)
     assert sampler["importance"]["fallback"].startswith("Pareto k̂")
+
+
+def test_a_saved_importance_fit_reads_back_with_its_method_and_draws(demo_importance, tmp_path):
+    import bayeshopf as bh
+    from bayeshopf.diagnostics.checks import Status
+    from bayeshopf.fit_folder import save_hybrid
+
+    fit, _ = demo_importance
+    save_hybrid(fit, tmp_path / "fit")
+    back = bh.load_fit(tmp_path / "fit")
+    assert back.posterior.run.method == "importance"
+    np.testing.assert_allclose(np.sort(back.posterior.run.samples["mu0"]),
+                               np.sort(fit.run.samples["mu0"]))
+    assert back.diagnostics.sampler.status == Status.OK

@@ -128,7 +128,7 @@ def _print_diagnostics(summary: dict) -> None:
         draws = (f" × {post['draws_per_chain']} draws" if "draws_per_chain" in post else "")
         print(f"\nNUTS, {post['chains']} chains{draws}: R̂ ≤ {worst:.3f}, bulk ESS ≥ {ess:.0f} "
               f"for {', '.join(post['sites'])}; {post['divergences']} divergences")
-    elif post.get("method") == "importance":
+    elif post.get("method") == "importance" and "pareto_k" in post:
         print(f"\nimportance sampling from the MAP's Laplace approximation: Pareto k̂ "
               f"{post['pareto_k']:.2f} (at most {post['k_max']}), {post['ess']:.0f} effective "
               f"of {post['proposals']} draws")

@@ -50,7 +50,7 @@ def _hybrid_markdown(h: dict) -> list[str]:
                      f"(limit {c['ess_limit']}), {c['divergences']} divergences"
                      if c.get("r_hat") is not None else
                      f"* NUTS, {s.get('num_chains')} chain(s): R̂ not computed")
-    elif c.get("method") == "importance":
+    elif c.get("method") == "importance" and c.get("pareto_k") is not None:
         lines.append(f"* importance sampling from the MAP's Laplace approximation: Pareto k̂ "
                      f"{c['pareto_k']:.2f}, {c['ess']:.0f} effective draws")
     elif c.get("method") == "svi":
