@@ -249,7 +249,7 @@ def sample_posterior(inputs: ModelInputs, map_point: MapPoint,
                      settings: CollapsedSettings, *,
                      seed: int = 0, progress: bool = True, method: str | None = None
                      ) -> PosteriorRun:
-    """NUTS or SVI from the MAP point, then one exact map draw per posterior draw."""
+    """NUTS, importance sampling or SVI from the MAP point, then one exact map draw per draw."""
     ensure_x64()
     method = method or settings.inference
     if method not in METHODS:

@@ -1,7 +1,9 @@
 r"""Importance sampling from the MAP's Laplace approximation, Pareto-smoothed, NUTS where it fails.
 
 The collapsed model leaves a dozen nonlinear parameters, whose posterior is
-close to Gaussian around the MAP. Draws from a multivariate Student-t proposal
+often close to Gaussian around the MAP (with the discrepancy and the network
+at infinite width; not μ0's long tail in the default model,
+``docs/inference.md``). Draws from a multivariate Student-t proposal
 ``q`` there, weighted by ``w ∝ p(x | y) / q(x)`` (the potential at each
 draw, no gradient), estimate the posterior; Pareto smoothing of the largest
 weights (PSIS, Vehtari, Simpson, Gelman, Yao & Gabry 2024, ArviZ's
@@ -109,7 +111,7 @@ def importance_draws(potential, x0, cov, n_out: int, rng) -> tuple[np.ndarray | 
     check = {"proposals": 3 * PROPOSALS, "df": DF, "k_max": K_MAX}
     x, w, k1 = _round(potential, x0, cov, 1, rng)
     mean = w @ x
-    c = np.cov(x.T, aweights=w) * INFLATION
+    c = np.atleast_2d(np.cov(x.T, aweights=w)) * INFLATION
     try:
         np.linalg.cholesky(c)
     except np.linalg.LinAlgError:        # round 1's weights on too few draws: its own start
