@@ -395,9 +395,10 @@ def summary(seeds: list[int], infinite: bool = False) -> None:
             ax.set_xticklabels(["0", "0.5", "1"])
             if r == len(runs) - 1:
                 ax.set_xlabel("rank of the truth among the draws")
-        run = (name.replace("_inf", ", infinite width").replace("_is", ", importance")
-               .replace("_", ", "))
-        axes[r, 0].set_ylabel(f"{run}\nsimulations (of {row['n']})", fontsize=9)
+        parts = (name.replace("_inf", ", infinite width").replace("_is", ", importance")
+                 .replace("_", ", ")).split(", ")
+        run = ", ".join(parts[:2]) + ("\n" + ", ".join(parts[2:]) if parts[2:] else "")
+        axes[r, 0].set_ylabel(f"{run}\nsimulations (of {row['n']})", fontsize=8)
     fig.suptitle("Simulation-based calibration: ranks of the truth among 99 posterior draws "
                  "(solid: expected count; dashed: 99% range of a bin under uniform ranks)",
                  fontsize=9)
