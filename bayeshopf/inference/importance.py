@@ -39,7 +39,6 @@ import warnings
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
-from scipy.stats import multivariate_t
 
 from bayeshopf import _preload
 from bayeshopf.inference import devices, nuts, optimum, programs
@@ -73,7 +72,14 @@ def _psis(log_w: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def _round(potential, x0, cov, n_calls: int, rng) -> tuple[np.ndarray, np.ndarray, float]:
-    """``n_calls · PROPOSALS`` draws from ``t_ν(x0, cov)``: ``(draws, weights, k̂)``."""
+    """``n_calls · PROPOSALS`` draws from ``t_ν(x0, cov)``: ``(draws, weights, k̂)``.
+
+    SciPy's ``stats`` is imported here, not with the module: the sampler's
+    background import (:mod:`bayeshopf._preload`, ArviZ) has usually loaded it
+    by then, and a fit by NUTS never needs it.
+    """
+    from scipy.stats import multivariate_t
+
     q = multivariate_t(loc=x0, shape=cov, df=DF, allow_singular=False)
     x = q.rvs(size=n_calls * PROPOSALS, random_state=rng).reshape(-1, np.size(x0))
     u = np.concatenate([np.asarray(potential(jnp.asarray(c)), dtype=float)
