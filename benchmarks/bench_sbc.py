@@ -134,19 +134,16 @@ def synthesize(rs, frame, coeffs, omega, rng, noise: float = NOISE,
     return replace(rs, recordings=tuple(out), control=None)
 
 
-def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
-    """NUTS on new data of the design's shape, compiled once (data as traced arguments).
+def model_info(spec, mu, sign, se, omega_se):
+    """NumPyro's model information of the collapsed model, the data as dynamic arguments.
 
-    NumPyro's functional NUTS (``numpyro.infer.hmc.hmc``): the kernel the
-    ``MCMC`` class runs, with its step-size and dense mass-matrix adaptation,
-    from the package's deterministic start; each chain one compiled call
-    (``MCMC.run`` compiles its loop anew on every call, and a process that
-    fitted some sixty data sets that way ran out of memory maps).
+    Returns ``(info, post)``: ``initialize_model``'s record (from the package's
+    deterministic start values) and the sites' transforms, which do not read
+    the data.
     """
     import jax
     import jax.numpy as jnp
     from numpyro.infer import init_to_value
-    from numpyro.infer.hmc import hmc
     from numpyro.infer.util import initialize_model
 
     from bayeshopf.inference.programs import _initial_values
@@ -161,9 +158,25 @@ def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
     info = initialize_model(jax.random.PRNGKey(0), model, model_args=example,
                             init_strategy=init_to_value(values=_initial_values(spec)),
                             dynamic_args=True, validate_grad=False)
+    return info, info.postprocess_fn(*example)
+
+
+def make_runner(spec, mu, sign, se, omega_se, warmup: int, samples: int):
+    """NUTS on new data of the design's shape, compiled once (data as traced arguments).
+
+    NumPyro's functional NUTS (``numpyro.infer.hmc.hmc``): the kernel the
+    ``MCMC`` class runs, with its step-size and dense mass-matrix adaptation,
+    from the package's deterministic start; each chain one compiled call
+    (``MCMC.run`` compiles its loop anew on every call, and a process that
+    fitted some sixty data sets that way ran out of memory maps).
+    """
+    import jax
+    import jax.numpy as jnp
+    from numpyro.infer.hmc import hmc
+
+    info, post = model_info(spec, mu, sign, se, omega_se)
     z0 = info.param_info.z
     init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
-    post = info.postprocess_fn(*example)       # the sites' transforms do not read the data
 
     @jax.jit
     def chain(key, data):
@@ -202,26 +215,13 @@ def make_importance_runner(spec, mu, sign, se, omega_se, warmup: int, samples: i
     import jax
     import jax.numpy as jnp
     from jax.flatten_util import ravel_pytree
-    from numpyro.infer import init_to_value
-    from numpyro.infer.util import initialize_model
     from scipy.optimize import minimize
 
     from bayeshopf.inference import importance
     from bayeshopf.inference.optimum import laplace_covariance
-    from bayeshopf.inference.programs import _initial_values
-    from bayeshopf.model import collapsed as cm
 
-    def model(mu, sign, coeffs, coeffs_se, omega, omega_se):
-        cm.collapsed_model(spec, mu, sign, coeffs, coeffs_se, omega, omega_se)
-
-    shape = (len(mu), 2, 2 * spec.n_harmonics + 1)
-    example = (jnp.asarray(mu), jnp.asarray(sign), jnp.zeros(shape), jnp.asarray(se),
-               jnp.full(len(mu), spec.omega_centre), jnp.asarray(omega_se))
-    info = initialize_model(jax.random.PRNGKey(0), model, model_args=example,
-                            init_strategy=init_to_value(values=_initial_values(spec)),
-                            dynamic_args=True, validate_grad=False)
+    info, post = model_info(spec, mu, sign, se, omega_se)
     x_start, unravel = ravel_pytree(info.param_info.z)
-    post = info.postprocess_fn(*example)       # the sites' transforms do not read the data
 
     def potential(x, data):
         return info.potential_fn(*data)(unravel(x))
