@@ -123,8 +123,8 @@ def test_a_failed_check_runs_nuts_and_says_why(demo_importance, monkeypatch):
     fit, _ = demo_importance
     called = {}
 
-    def fake_nuts(inputs, map_point, settings, key, progress):
-        called["yes"] = True
+    def fake_nuts(inputs, map_point, settings, key, progress, laplace=None):
+        called["laplace"] = laplace       # the covariance importance sampling computed
         return {"mu0": np.zeros((2, 3))}, 0, {"draws_per_chain": 3}
 
     monkeypatch.setattr(importance, "K_MAX", -1.0)
@@ -133,6 +133,8 @@ def test_a_failed_check_runs_nuts_and_says_why(demo_importance, monkeypatch):
     method, chains, _, sampler = importance.run_importance(
         inputs, fit.map_point, fit.settings, jnp.array([0, 7], dtype=jnp.uint32), False)
     assert called and method == "nuts" and chains["mu0"].shape == (2, 3)
+    cov, ok = called["laplace"]
+    assert ok and cov.shape[0] == cov.shape[1] and np.all(np.linalg.eigvalsh(cov) > 0)
     assert sampler["importance"]["fallback"].startswith("Pareto k̂")
 
 

@@ -136,21 +136,18 @@ def compile_programs(inputs: ModelInputs, settings: CollapsedSettings) -> None:
                                    settings.num_chains), shapes)
     n = got["x"].shape[0]
     programs.potential_program(inputs, n, ahead=True)
-    key = programs.model_key(inputs)
-    if settings.inference == "importance":
-        info, unravel, potential = programs.model_functions(inputs)
-        devices.mapped_call("potential-draws", potential,
-                            jax.ShapeDtypeStruct((importance.PROPOSALS, n), jnp.float64),
-                            key=key, ahead=True)
-        devices.mapped_call("constrain-draws", lambda xi: info.postprocess_fn(unravel(xi)),
-                            jax.ShapeDtypeStruct((draws, n), jnp.float64), key=key, ahead=True)
-    elif not is_nuts:
+    if settings.inference == "svi":
         return
-    else:
+    if is_nuts:
         where = devices.placement(n_dev)
         states = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=where)
                   for a in got["states"]]
         nuts.nuts_advance(inputs, settings, n, n_dev, states, ahead=True)
+    else:       # importance sampling
+        importance.potential_draws(
+            inputs, jax.ShapeDtypeStruct((importance.PROPOSALS, n), jnp.float64), ahead=True)
+        importance.sites_at(inputs, jax.ShapeDtypeStruct((draws, n), jnp.float64), ahead=True)
+    key = programs.model_key(inputs)
     keys = jax.ShapeDtypeStruct((draws, 2), jnp.uint32)
     devices.mapped_call("maps", _map_draw(inputs), (got["theta"], keys), key=key, ahead=True)
     devices.mapped_call("loglik", _pointwise(inputs), got["theta"], key=key, ahead=True)

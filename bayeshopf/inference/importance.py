@@ -34,7 +34,6 @@ process's devices; every round calls one stored program.
 from __future__ import annotations
 
 import sys
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -57,16 +56,12 @@ K_MAX = 0.7
 
 def _psis(log_w: np.ndarray) -> tuple[np.ndarray, float]:
     """Normalised Pareto-smoothed weights and their shape k̂ (ArviZ's ``psislw``)."""
-    with warnings.catch_warnings():   # the 0.2x series announces its 1.x refactor on import
-        warnings.simplefilter("ignore", FutureWarning)
-        import arviz as az
-
     lw = np.asarray(log_w, dtype=float)
     ok = np.isfinite(lw)
     if not ok.any():
         return np.full(lw.shape, 1.0 / lw.size), np.inf
     lw = np.where(ok, lw, lw[ok].min() - 800.0)      # a draw the model rejects: weight 0
-    smoothed, k = az.psislw(lw - lw.max())
+    smoothed, k = nuts.arviz().psislw(lw - lw.max())
     w = np.exp(smoothed - smoothed.max())
     return w / w.sum(), float(k)
 
@@ -88,12 +83,25 @@ def _round(potential, x0, cov, n_calls: int, rng) -> tuple[np.ndarray, np.ndarra
     return x, w, k
 
 
-def _draws_of(inputs: ModelInputs, x: np.ndarray) -> dict:
-    """Every site (the deterministic ones too) at the flat unconstrained draws ``x``."""
+def potential_draws(inputs: ModelInputs, x, ahead: bool = False):
+    """The potential at each flat unconstrained draw ``x`` ``(m, n)``, compiled and stored.
+
+    :func:`~bayeshopf.inference.devices.mapped_call`, the draws split over the
+    devices; with ``ahead`` (``x`` a shape) only compiled in the background.
+    """
+    potential = programs.model_functions(inputs)[2]
+    return devices.mapped_call("potential-draws", potential, x, key=programs.model_key(inputs),
+                               ahead=ahead)
+
+
+def sites_at(inputs: ModelInputs, x, ahead: bool = False):
+    """Every site (the deterministic ones too) at the flat unconstrained draws ``x`` ``(m, n)``.
+
+    As :func:`potential_draws`, compiled and stored, or with ``ahead`` only compiled.
+    """
     info, unravel, _ = programs.model_functions(inputs)
-    out = devices.mapped_call("constrain-draws", lambda xi: info.postprocess_fn(unravel(xi)),
-                              jnp.asarray(x), key=programs.model_key(inputs))
-    return {k: np.asarray(v)[None] for k, v in out.items() if not k.startswith("marginal")}
+    return devices.mapped_call("constrain-draws", lambda xi: info.postprocess_fn(unravel(xi)),
+                               x, key=programs.model_key(inputs), ahead=ahead)
 
 
 def importance_draws(potential, x0, cov, n_out: int, rng) -> tuple[np.ndarray | None, dict]:
@@ -148,18 +156,20 @@ def run_importance(inputs: ModelInputs, map_point: MapPoint, settings: Collapsed
                                   for k, v in map_point.unconstrained.items()})[0])
     cov, laplace = optimum.laplace_covariance(programs.potential_program(inputs, x0.size), x0)
     _preload.start()   # ArviZ (PSIS, R̂ and ESS, posterior.nc) imports beside the first round
-    potential, mkey = programs.model_functions(inputs)[2], programs.model_key(inputs)
     rng = np.random.default_rng(np.asarray(key, dtype=np.uint32).ravel().tolist())
     if laplace:
-        x, check = importance_draws(
-            lambda x: devices.mapped_call("potential-draws", potential, x, key=mkey),
-            x0, cov, settings.num_chains * settings.num_samples, rng)
+        x, check = importance_draws(lambda x: potential_draws(inputs, x), x0, cov,
+                                    settings.num_chains * settings.num_samples, rng)
         if x is not None:
-            return "importance", _draws_of(inputs, x), 0, check
+            out = sites_at(inputs, jnp.asarray(x))
+            chains = {k: np.asarray(v)[None] for k, v in out.items()
+                      if not k.startswith("marginal")}
+            return "importance", chains, 0, check
     else:
         check = {"fallback": "the MAP's Hessian is not positive definite"}
     if progress:
         print(f"posterior: importance sampling not used ({check['fallback']}); NUTS instead",
               file=sys.stderr)
-    chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, key, progress)
+    chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, key, progress,
+                                         laplace=(cov, laplace))
     return "nuts", chains, div, {**sampler, "importance": check}

@@ -34,16 +34,22 @@ ESS_MIN = 400
 CHECKED = ("mu0", "a2", "mu_fold", "a4", "w_unfold")
 
 
-def rhat_ess(chains: dict) -> dict:
-    """R̂ and bulk ESS per site (ArviZ) from draws by chain ``(n_chains, n_draws)`` (scalar sites).
+def arviz():
+    """The ``arviz`` module, imported at the first call.
 
-    ArviZ is imported here, at the first call: the sampler's background import
-    (:mod:`bayeshopf._preload`) has usually loaded it by then.
+    The sampler's background import (:mod:`bayeshopf._preload`) has usually
+    loaded it by then. (:func:`bayeshopf.diagnostics.arviz_io.arviz` is the same
+    for the layers above inference.)
     """
     with warnings.catch_warnings():  # the 0.2x series announces its 1.x refactor on import
         warnings.simplefilter("ignore", FutureWarning)
         import arviz as az
+    return az
 
+
+def rhat_ess(chains: dict) -> dict:
+    """R̂ and bulk ESS per site (ArviZ) of draws by chain ``(n_chains, n_draws)`` (scalar sites)."""
+    az = arviz()
     ds = az.convert_to_dataset({k: np.asarray(v) for k, v in chains.items()})
     rhat, ess = az.rhat(ds), az.ess(ds, method="bulk")
     return {k: (float(rhat[k]), float(ess[k])) for k in chains}
@@ -167,7 +173,7 @@ def nuts_advance(inputs: ModelInputs, settings: CollapsedSettings, n: int, n_dev
 
 
 def run_nuts(inputs: ModelInputs, map_point: MapPoint, settings: CollapsedSettings, key,
-             progress: bool):
+             progress: bool, laplace: tuple | None = None):
     """NumPyro's NUTS kernel from the MAP point, chains extended until they pass.
 
     The mass matrix starts at the MAP's Laplace covariance (the inverse Hessian
@@ -186,6 +192,11 @@ def run_nuts(inputs: ModelInputs, map_point: MapPoint, settings: CollapsedSettin
     fewer than ``max_samples`` draws per chain exist, every chain gets
     ``extend_samples`` more. The draws are those of one longer run; only its
     length depends on the diagnostics.
+
+    ``laplace``: the MAP's Laplace covariance and whether it exists,
+    ``(cov, ok)`` (:func:`~bayeshopf.inference.optimum.laplace_covariance`),
+    where the caller has computed it already (importance sampling that fell
+    back to NUTS).
 
     On one device the chains run one after another inside each call
     (``lax.map`` over them), not vectorized: XLA's batched Cholesky and
@@ -207,9 +218,12 @@ def run_nuts(inputs: ModelInputs, map_point: MapPoint, settings: CollapsedSettin
     keys = jax.random.split(key, settings.num_chains)
     # compiled once per data set, settings and MAP point (any seed), then loaded
     # (inference.cache); compile_programs may have started compiling them already
-    cov, laplace = (optimum.laplace_covariance(programs.potential_program(inputs, x0.shape[0]),
-                                               x0)
-                    if settings.dense_mass else (np.eye(x0.shape[0]), False))
+    if not settings.dense_mass:
+        laplace = (np.eye(x0.shape[0]), False)
+    elif laplace is None:
+        laplace = optimum.laplace_covariance(programs.potential_program(inputs, x0.shape[0]),
+                                             x0)
+    cov, laplace = laplace
     leaves = devices.place(_nuts_start(inputs, settings, x0, keys, cov), n_dev)
     advance = nuts_advance(inputs, settings, x0.shape[0], n_dev, leaves)
     n_warm, chunk = settings.num_warmup, nuts_chunk(settings)
