@@ -19,6 +19,7 @@ from bayeshopf.data.recording import RecordingSet
 from bayeshopf.diagnostics.bands import FrequencyBand, TimeSeriesBand, time_series_bands
 from bayeshopf.diagnostics.bifurcation import BranchBand, DiagramBands, quantiles
 from bayeshopf.diagnostics.bifurcation import levels as band_levels
+from bayeshopf.diagnostics.control import control_gain
 from bayeshopf.diagnostics.fit_checks import orbit_errors
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import CI, Interval, interval
@@ -37,6 +38,7 @@ from bayeshopf.predictive import (
     draw_indices,
     extrapolation_factor,
     frequency_draws,
+    frequency_noise,
     network_draws,
     noise_sd,
     orbit_coefficients,
@@ -207,16 +209,18 @@ class HybridPosterior:
         that control, else the uncontrolled system's. With the discrepancy in
         μ, all of it at the model's point that the rig has at μ (:meth:`model_mu`).
         """
-        idx = self._draw_indices(n_draws)
-        theta = {k: v[idx] for k, v in self.theta.items()}
-        c = orbit_coefficients(self.spec, theta, self.run.betas[idx],
-                               self.model_mu(mu, branch, n_draws), branch_sign(branch),
-                               per_draw=True, control=control)
-        if self.spec.nn_training is not None:
-            c = c + self._network(mu, branch, n_draws)
-        if not self.spec.has_discrepancy:
+        def compute(theta, idx, mu):
+            c = orbit_coefficients(self.spec, theta, self.run.betas[idx],
+                                   self.model_mu(mu, branch, n_draws), branch_sign(branch),
+                                   per_draw=True, control=control)
+            if self.spec.nn_training is not None:
+                c = c + self._network(mu, branch, n_draws)
+            if self.spec.has_discrepancy:
+                c = c + self._discrepancy(mu, branch, n_draws)[0]
+            c.flags.writeable = False         # shared by every caller (memo)
             return c
-        return c + self._discrepancy(mu, branch, n_draws)[0]
+
+        return self._memo("orbits", mu, branch, n_draws, compute, control)
 
     def _network(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
         """:func:`network_draws` at μ for the draws of ``n_draws``, once per μ and branch."""
@@ -225,14 +229,18 @@ class HybridPosterior:
             self.seed))
 
     @cached_property
-    def _discrepancy_memo(self) -> dict:
+    def _draw_memo(self) -> dict:
         return {}
 
-    def _memo(self, what: str, mu, branch: str, n_draws: int | None, compute):
-        """``compute(θ of the draws, their indices, μ)``, once per ``what``, μ, branch and draws."""
+    def _memo(self, what: str, mu, branch: str, n_draws: int | None, compute, control=None):
+        """``compute(θ of the draws, their indices, μ)``, once per what, μ, branch, draws, control.
+
+        The figures, the predictive check and the summary share them.
+        """
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        key = (what, mu.tobytes(), branch, n_draws)
-        memo = self._discrepancy_memo
+        held = b"" if control is None else np.asarray(control, float).tobytes()
+        key = (what, mu.tobytes(), branch, n_draws, held)
+        memo = self._draw_memo
         if key not in memo:
             if len(memo) >= 64:
                 memo.clear()
@@ -323,28 +331,9 @@ class HybridPosterior:
     def control_gain(self, ci: float = CI) -> dict | None:
         """The orbits' response to the control's fundamental, or ``None`` without the term.
 
-        ``gain``: the median and ``ci`` interval of the real and imaginary parts
-        of ``H``, the response of the second frame axis ``w2`` (frame units per
-        unit of the control channel; :mod:`bayeshopf.model.collapsed`, "Control");
-        ``prior_sd``: their prior sd; ``response``: per recording, the median of
-        ``|H U_i|`` relative to the measured fundamental of ``w2``. Where ``U`` is
-        nearly proportional to the orbit, as on the wind-tunnel rig, that part of
-        the response is not told apart from the map's own linear gain, so
-        ``response`` is an upper bound on what the control moves.
+        :func:`~bayeshopf.diagnostics.control.control_gain` of this fit's draws.
         """
-        spec = self.spec
-        if spec.control_scale is None:
-            return None
-        h = np.asarray(self.run.betas)[:, spec.n_map:spec.n_basis, 1]       # (n, 2): w2's
-        gain = {part: interval(h[:, j], ci).to_json() for j, part in enumerate(("re", "im"))}
-        u = np.asarray(self.features.control)                               # (n_rec, 2)
-        resp = np.abs((h[:, :1] + 1j * h[:, 1:]) * (u[:, 0] - 1j * u[:, 1])[None])
-        K = spec.n_harmonics
-        c = self.features.coeffs[:, 1]
-        rel = np.median(resp, axis=0) / np.hypot(c[:, 1], c[:, K + 1])
-        return {"axis": "w2", "prior_sd": float(spec.control_scale), "gain": gain,
-                "units": "frame units per unit of the control channel",
-                "response": {name: float(rel[i]) for i, name in enumerate(self.features.names)}}
+        return control_gain(self.spec, self.run.betas, self.features, ci)
 
     # ----------------------------------------------------------------- frequency
     @property
@@ -366,12 +355,19 @@ class HybridPosterior:
         """
         if not self.has_frequency:
             raise FitError("this fit has no frequency model (fitted with frequency=False)")
-        idx = self._draw_indices(n_draws)
+        def curve(theta, idx, mu):
+            hz = frequency_draws(self.spec, theta, self.run.gammas[idx],
+                                 self.model_mu(mu, branch, n_draws), branch_sign(branch))
+            hz.flags.writeable = False        # shared by every caller (memo)
+            return hz
+
+        hz = self._memo("frequency", mu, branch, n_draws, curve)
+        if not predictive:
+            return hz
         se = float(np.median(self.features.omega_se)) if omega_se is None else omega_se
-        return frequency_draws(self.spec, {k: v[idx] for k, v in self.theta.items()},
-                               self.run.gammas[idx], self.model_mu(mu, branch, n_draws),
-                               branch_sign(branch), predictive=predictive, omega_se=se,
-                               seed=self.seed)
+        idx = self._draw_indices(n_draws)
+        return frequency_noise({"sigma_omega": self.theta["sigma_omega"][idx]}, hz, se,
+                               self.seed)
 
     def frequency_band(self, mu, branch: str = "stable", predictive: bool = False,
                        ci: float = CI) -> FrequencyBand:
@@ -383,14 +379,16 @@ class HybridPosterior:
         return FrequencyBand.from_draws(branch, mu, self.frequency(mu, branch, predictive), ci)
 
     def time_series(self, mu: float, branch: str, t, phase0: float = 0.0,
-                    n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
+                    n_draws: int | None = N_BAND_DRAWS, control=None) -> np.ndarray:
         """Predicted planar channels (physical units) at times ``t``, ``(n, n_t, 2)``.
 
         The orbit of each draw traversed at its own frequency,
         ``w(Ω t + φ_0)``, with ``φ_0`` the phase at ``t = 0`` relative to the crest
-        of z1's fundamental (the features' phase origin).
+        of z1's fundamental (the features' phase origin). ``control`` ``(1, 2)``: a
+        recording's control fundamental (:meth:`recording_control`), for the
+        orbit as it was held.
         """
-        c = self.orbit_coefficients([mu], branch, n_draws)[:, 0]             # (n, 2, 2K+1)
+        c = self.orbit_coefficients([mu], branch, n_draws, control=control)[:, 0]
         om = 2 * np.pi * self.frequency([mu], branch, n_draws=n_draws)[:, 0]  # (n,)
         phi = om[:, None] * np.asarray(t, dtype=float)[None] + phase0        # (n, n_t)
         K = self.spec.n_harmonics
@@ -482,10 +480,20 @@ class HybridPosterior:
         Computed once and shared by :meth:`ppc` and :meth:`orbit_error`.
         """
         f = self.features
-        return tuple(
-            self.orbit_coefficients([f.mu[i]], "unstable" if f.unstable[i] else "stable",
-                                    control=self.recording_control(i))[:, 0]
-            for i in range(f.n_recordings))
+        out = [None] * f.n_recordings
+        for branch in ("stable", "unstable"):        # one computation per branch
+            idx = np.flatnonzero(np.asarray(f.unstable, bool) == (branch == "unstable"))
+            if idx.size == 0:
+                continue
+            held = [self.recording_control(i) for i in idx]
+            control = None if held[0] is None else np.concatenate(held)
+            c = self.orbit_coefficients(f.mu[idx], branch, control=control)
+            for j, i in enumerate(idx):   # each μ's orbits are its own: remembered one by one
+                mu_i, one = [f.mu[i]], c[:, j:j + 1]
+                self._memo("orbits", mu_i, branch, N_BAND_DRAWS, lambda *_, one=one: one,
+                           held[j])
+                out[i] = one[:, 0]
+        return tuple(out)
 
     def ppc(self, ci: float = CI) -> PosteriorPredictiveCheck:
         """Posterior predictive check of each training recording (amplitudes and coefficients).

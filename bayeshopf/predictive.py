@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import json
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from bayeshopf._x64 import ensure_x64
 from bayeshopf.features.harmonics import HarmonicFeatures, phase_design
-from bayeshopf.inference.cache import compiled_call
+from bayeshopf.inference.devices import mapped_call
 from bayeshopf.model import collapsed as cm
 from bayeshopf.model import network_kernel as nk
 from bayeshopf.model import normal_form
@@ -91,19 +90,31 @@ def _spec_key(spec: cm.CollapsedSpec) -> str:
 
 
 def _orbit_program(spec: cm.CollapsedSpec):
-    """``(θ, β, μ per draw, sign) ↦ coefficients`` (to be compiled; lax.map over draws)."""
-    def one(a, sign):     # Φ(μ) β: the design of the likelihood, at every μ of the grid
-        t, b, mu = a
+    """One draw ``(θ, β, μ, sign) ↦`` its coefficients ``(n_mu, 2, 2K+1)``: ``Φ(μ) β``.
+
+    The design of the likelihood at every μ of the draw's grid; mapped over the
+    draws (:func:`~bayeshopf.inference.devices.mapped_call`), so that one
+    draw's network features (μ × phase × unit) are in memory at a time.
+    """
+    def one(a):
+        t, b, mu, sign = a
         return jnp.einsum("mkj,jc->mck", cm.design(spec, mu, sign, t), b[:spec.n_basis])
 
-    # one draw's network features (μ × phase × unit) in memory at a time
-    return lambda th, b, mu, sign: jax.lax.map(lambda a: one(a, sign), (th, b, mu))
+    return one
 
 
-def _frequency_grid(spec: cm.CollapsedSpec, th: dict, gammas, mu, sign):
-    """``Ω`` (rad/s) of draws ``(θ, γ)`` on a μ grid per draw ``(n, n_mu)``."""
-    th = {k: v[:, None] for k, v in th.items()}
-    return cm.frequency(spec, th, gammas[:, None, :], mu, sign)
+def _host(theta: dict) -> dict:
+    """Draws as host arrays (:func:`~bayeshopf.inference.devices.mapped_call` places them)."""
+    return {k: np.asarray(v, float) for k, v in theta.items()}
+
+
+def _frequency_program(spec: cm.CollapsedSpec):
+    """One draw ``(θ, γ, μ, sign) ↦ Ω`` (rad/s) on its μ grid (mapped over the draws)."""
+    def one(a):
+        t, g, mu, sign = a
+        return cm.frequency(spec, t, g, mu, sign)
+
+    return one
 
 
 def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: float, *,
@@ -126,10 +137,11 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     ensure_x64()
     n = np.shape(betas)[0]
     mu = np.asarray(mu, dtype=float) if per_draw else _per_draw(mu, n)
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    # stored (inference.cache.compiled_call): a warm process neither traces nor lowers it
-    c = np.asarray(compiled_call("orbits", lambda: _orbit_program(spec), (
-        th, jnp.asarray(betas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+    # stored (inference.cache.compiled_call): a warm process neither traces nor lowers
+    # it; the draws split over the process's devices (the CLI's: one per core)
+    c = np.asarray(mapped_call("orbits", _orbit_program(spec), (
+        _host(theta), np.asarray(betas, float), mu, np.full(n, float(sign))),
+        key=_spec_key(spec)))
     if control is None or spec.control_scale is None:
         return c
     cols = np.asarray(cm.control_columns(spec, np.asarray(control, float)))  # (n_mu, 2K+1, 2)
@@ -149,15 +161,24 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     every μ, so that a band over μ is smooth while each μ's marginal is exact.
     """
     ensure_x64()
-    mu = _per_draw(mu, np.shape(gammas)[0])
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    om = np.asarray(compiled_call(
-        "frequency-grid", lambda: lambda *a: _frequency_grid(spec, *a),
-        (th, jnp.asarray(gammas), jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
-    if predictive:
-        sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
-        om = om + sd * np.random.default_rng(seed).standard_normal((om.shape[0], 1))
-    return om / (2 * np.pi)
+    n = np.shape(gammas)[0]
+    mu = _per_draw(mu, n)
+    om = np.asarray(mapped_call("frequency-grid", _frequency_program(spec), (
+        _host(theta), np.asarray(gammas, float), mu, np.full(n, float(sign))),
+        key=_spec_key(spec)))
+    hz = om / (2 * np.pi)
+    return frequency_noise(theta, hz, omega_se, seed) if predictive else hz
+
+
+def frequency_noise(theta: dict, hz, omega_se: float, seed: int) -> np.ndarray:
+    """Frequency draws ``hz`` ``(n, n_mu)`` (Hz) plus a new recording's error.
+
+    ``N(0, σ_ω² + omega_se²)`` (rad/s), one standard-normal number per draw for
+    every μ (:func:`frequency_draws` with ``predictive``).
+    """
+    sd = np.sqrt(np.asarray(theta["sigma_omega"])[:, None] ** 2 + omega_se**2)
+    z = np.random.default_rng(seed).standard_normal((np.shape(hz)[0], 1))
+    return hz + sd / (2 * np.pi) * z
 
 
 def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
@@ -186,11 +207,11 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
 
 
 def _discrepancy_program(spec: cm.CollapsedSpec):
-    """``(θ, β, training μ and signs, μ, sign) ↦ (mean, var, nugget)`` of ``Δ`` per draw."""
+    """One draw ``(θ, β, μ, sign, training μ and signs) ↦ (mean, var, nugget)`` of ``Δ``."""
     from bayeshopf.model import discrepancy as dm
 
-    def one(a, mu_ref, sign_ref, mu, sign):       # mu: this draw's
-        t, b = a
+    def one(a):
+        t, b, mu, sign, mu_ref, sign_ref = a
         g_ref, x_ref = cm.discrepancy_geometry(spec, t, mu_ref, sign_ref, mu_ref, sign_ref)
         g, x = cm.discrepancy_geometry(spec, t, mu, sign * jnp.ones_like(mu), mu_ref, sign_ref)
         z = b[spec.n_basis:]                                          # (n_ref S, 2)
@@ -199,8 +220,7 @@ def _discrepancy_program(spec: cm.CollapsedSpec):
         var = jnp.stack([p[1] for p in pairs], axis=1)
         return mean, var, (t["sigma_rel"] * g) ** 2
 
-    return lambda th, b, mu_ref, sign_ref, mu, sign: jax.lax.map(
-        lambda a: one(a[:2], mu_ref, sign_ref, a[2], sign), (th, b, mu))
+    return one
 
 
 def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
@@ -211,13 +231,15 @@ def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: Ha
     or ``(n, n_mu)``, one row per draw.
     """
     ensure_x64()
-    mu = _per_draw(mu, np.shape(betas)[0])
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
+    n = np.shape(betas)[0]
+    mu = _per_draw(mu, n)
+    ref_mu = np.asarray(features.mu, float)
     ref_sign = np.where(features.unstable, -1.0, 1.0)
-    return tuple(np.asarray(a) for a in compiled_call(
-        "discrepancy", lambda: _discrepancy_program(spec),
-        (th, jnp.asarray(betas), jnp.asarray(features.mu), jnp.asarray(ref_sign),
-         jnp.asarray(mu), np.float64(sign)), key=_spec_key(spec)))
+    return tuple(np.asarray(a) for a in mapped_call(
+        "discrepancy", _discrepancy_program(spec),
+        (_host(theta), np.asarray(betas, float), mu, np.full(n, float(sign)),
+         np.broadcast_to(ref_mu, (n, ref_mu.size)), np.broadcast_to(ref_sign, (n, ref_sign.size))),
+        key=_spec_key(spec)))
 
 
 def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
@@ -241,12 +263,13 @@ def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: Harm
 
 
 def _network_program(spec: cm.CollapsedSpec):
-    """``(θ, μ, sign) ↦ ρ²τ_s² var`` of the infinite-width network's coefficients, per draw."""
-    def one(t, mu, sign):
+    """One draw ``(θ, μ, sign) ↦ ρ²τ_s² var`` of the infinite-width network's coefficients."""
+    def one(a):
+        t, mu, sign = a
         var = nk.conditional_var(spec, t, mu, sign * jnp.ones_like(mu), cm.N_PHI)   # (n_mu, M)
         return (spec.orbit_scale * t["tau_shape"]) ** 2 * var
 
-    return lambda th, mu, sign: jax.lax.map(lambda a: one(a[0], a[1], sign), (th, mu))
+    return one
 
 
 def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: int) -> np.ndarray:
@@ -270,10 +293,9 @@ def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: in
     M = 2 * spec.n_harmonics + 1
     if spec.nn_training is None:
         return np.zeros((n, mu.shape[1], 2, M))
-    th = {k: jnp.asarray(v) for k, v in theta.items()}
-    var = np.asarray(compiled_call("network", lambda: _network_program(spec),
-                                   (th, jnp.asarray(mu), np.float64(sign)),
-                                   key=_spec_key(spec)))                       # (n, n_mu, M)
+    var = np.asarray(mapped_call("network", _network_program(spec),
+                                 (_host(theta), mu, np.full(n, float(sign))),
+                                 key=_spec_key(spec)))                         # (n, n_mu, M)
     eps = _common_over_mu(np.random.default_rng([seed, 4]), (n, mu.shape[1], 2, M))
     return np.sqrt(var)[:, :, None, :] * eps
 

@@ -3,6 +3,7 @@
 Run: ``python benchmarks/bench_discrepancy_coverage.py FIRST LAST [--designs
 paired,short,sweep] [--models discrepancy,plain]`` (or ``--seeds 1200,1206,…`` for
 chosen seeds); ``--summary [FIRST LAST] [--seeds …] [--models …] [--warned-by MODEL]``
+(``--agree REF,OTHER``: also how often OTHER's intervals agree with REF's, set by set)
 prints the table of what finished, over the sets that every listed model fitted, with
 each coverage's 90% Clopper–Pearson interval (and, with ``kernel_w``, the misses among
 the sets its fit's window check flags), and each model's coverage, width and score among
@@ -26,7 +27,10 @@ discrepancy's floor ``κ = 1`` near the Hopf point, ``discrepancy_floor=1``;
 the discrepancy in μ of :mod:`bayeshopf.model.bifurcation_shift` for each ``κ`` of
 :data:`KAPPAS`, read by ``--summary`` as models ``kernel_s@κ``, and at ``κ = 2`` with the
 floors of :data:`FLOORS` on the scale in μ, ``kernel_s@2fφ`` (both points) and
-``kernel_s@2hφ`` (the Hopf point only); every other setting the default):
+``kernel_s@2hφ`` (the Hopf point only); ``kernel_s_is``: ``kernel_s`` with the
+posterior by importance sampling (``inference="importance"``; its rows record whether
+the check passed, ``method``, and k̂), read as ``kernel_s_is@…``; every other setting
+the default):
 
 * ``paired``: 4 stable and 3 unstable orbits across the fold–Hopf gap, 20 s at
   500 Hz, 1.5% noise (the reference class's design);
@@ -80,7 +84,8 @@ MODELS = {"plain": dict(discrepancy=False, nn_width=16),
           "kernel_h": dict(discrepancy=True, nn_width=None, unfolding="horizontal"),
           "kernel_w": dict(discrepancy=True, nn_width=None, unfolding="window"),
           "kernel_f": dict(discrepancy=True, nn_width=None, discrepancy_floor=1.0),
-          "kernel_s": dict(discrepancy=True, nn_width=None)}
+          "kernel_s": dict(discrepancy=True, nn_width=None),
+          "kernel_s_is": dict(discrepancy=True, nn_width=None, inference="importance")}
 #: The sizes ``κ`` of the discrepancy in μ at the Hopf point and the fold
 #: (:mod:`bayeshopf.model.bifurcation_shift`) whose intervals a ``kernel_s`` row holds;
 #: ``--summary --models kernel_s@2`` reads them as a model of their own.
@@ -124,12 +129,13 @@ def fit_one(rs, model: str) -> dict:
     post = fit_hybrid(rs, "subcritical", seed=0, settings=settings,
                       progress=bool(os.environ.get("BENCH_PROGRESS")))
     out = {"wall_s": time.perf_counter() - t0, "warnings": post.diagnostics["warnings"],
-           "divergences": int(post.run.divergences), "sampler": post.run.sampler}
+           "divergences": int(post.run.divergences), "sampler": post.run.sampler,
+           "method": post.run.method}
     for k in ("mu0", "mu_fold", "eta", "sigma_rel", "eta_h", "ell_h", "depth_h", "width_h"):
         iv = post.interval(k)
         if iv is not None:
             out[k] = {"median": iv.median, "lo": iv.lo, "hi": iv.hi}
-    if model == "kernel_s":
+    if model.startswith("kernel_s"):
         out["shift"] = shifted_intervals(post)
     return out
 
@@ -163,15 +169,16 @@ def shifted_intervals(post) -> dict:
 
 
 def expand_shifts(rows) -> list:
-    """Each ``kernel_s`` row also as ``kernel_s@κ`` (``@0``: the model's own intervals)."""
+    """Each ``kernel_s`` (``kernel_s_is``) row also as ``kernel_s@κ`` (``@0``: the model's own)."""
     out = list(rows)
     for r in rows:
-        if r.get("model") != "kernel_s" or "shift" not in r:
+        model = r.get("model", "")
+        if not model.startswith("kernel_s") or "shift" not in r:
             continue
-        out.append({**r, "model": "kernel_s@0"})
+        out.append({**r, "model": f"{model}@0"})
         for kappa, ivs in r["shift"].items():
             name = f"{float(kappa):g}" if kappa.replace(".", "").isdigit() else kappa
-            row = {**r, "model": f"kernel_s@{name}"}
+            row = {**r, "model": f"{model}@{name}"}
             for k, iv in ivs.items():
                 t = r["truth"][k]
                 row[k] = {**iv, "inside": bool(iv["lo"] <= t <= iv["hi"]),
@@ -324,6 +331,36 @@ def _cell(sub) -> str:
     return f"{len(sub)}; μ0 {parts[0]}; fold {parts[1]}"
 
 
+#: The largest gap between two methods' interval ends, as a fraction of the reference's
+#: width, at which they agree (the package's rule for SVI against NUTS).
+AGREE = 0.25
+
+
+def agreement(rows, ref: str, other: str) -> None:
+    """Per design, how often ``other``'s 90% intervals agree with ``ref``'s, set by set.
+
+    Agree: both ends within :data:`AGREE` of ``ref``'s width. Also the largest
+    gap, and for ``other`` how many fits its posterior method ran (importance
+    sampling, or NUTS after a failed check).
+    """
+    print(f"\nAgreement of {other} with {ref} (ends within {AGREE:.0%} of {ref}'s width):\n\n"
+          "| design | sets | μ0 agree | μ0 largest gap | fold agree | fold largest gap | "
+          "method of " + other + " |\n|---|---:|---:|---:|---:|---:|---|")
+    for design in DESIGNS:
+        at, common = _fitted_by_all(rows, design, (ref, other))
+        if not common:
+            continue
+        cells = []
+        for k in ("mu0", "mu_fold"):
+            gaps = [max(abs(at[(s, other)][k]["lo"] - at[(s, ref)][k]["lo"]),
+                        abs(at[(s, other)][k]["hi"] - at[(s, ref)][k]["hi"]))
+                    / (at[(s, ref)][k]["hi"] - at[(s, ref)][k]["lo"]) for s in common]
+            cells += [f"{sum(g <= AGREE for g in gaps)}/{len(gaps)}", f"{max(gaps):.0%}"]
+        methods = [at[(s, other)].get("method", "?") for s in common]
+        counts = ", ".join(f"{m} {methods.count(m)}" for m in sorted(set(methods)))
+        print(f"| {design} | {len(common)} | " + " | ".join(cells) + f" | {counts} |")
+
+
 def flagged_misses(rows, models) -> None:
     """Misses among the window's fits the fit's check flags and among the rest.
 
@@ -373,6 +410,11 @@ def main(argv):
         sys.exit(f"--warned-by: one of the --models expected; got {by}")
     if "--summary" in argv:
         summary(None if seeds is None else set(seeds), models, by)
+        if "--agree" in argv:
+            ref, other = argv[argv.index("--agree") + 1].split(",")
+            rows = [json.loads(x) for x in OUT.read_text().splitlines()]
+            agreement(expand_shifts([r for r in rows if "mu0" in r and (
+                seeds is None or r["seed"] in seeds)]), ref, other)
         return
     run(seeds, designs, models or ["plain", "discrepancy"])
 

@@ -86,7 +86,8 @@ def time_series_bands(post, recordings, n_periods: float = 4.0, channel: int = 0
 
     Per recording, the measured channel on a uniform grid of about 60 points
     per period over its first ``n_periods``, and the quantiles of
-    ``post.time_series`` started at the recording's phase at its first sample.
+    ``post.time_series`` started at the recording's phase at its first sample,
+    of the orbit as the recording's control held it (as the phase portraits').
     """
     out = []
     f = post.features
@@ -107,7 +108,8 @@ def time_series_bands(post, recordings, n_periods: float = 4.0, channel: int = 0
         idx = np.clip(np.searchsorted(t, tg), 0, t.size - 1)
         near = np.where(np.abs(t[idx - 1] - tg) < np.abs(t[idx] - tg), idx - 1, idx)
         meas = np.where(np.abs(t[near] - tg) <= 0.5 * r.dt, z[near, channel], np.nan)
-        pred = post.time_series(r.mu, r.branch, tg, phase0)[..., channel]
+        pred = post.time_series(r.mu, r.branch, tg, phase0,
+                                control=post.recording_control(i))[..., channel]
         q = np.nanquantile(pred, [0.5, 0.5 - ci / 2, 0.5 + ci / 2], axis=0)
         name = recordings.planar[channel]
         out.append(TimeSeriesBand(r.name, r.mu, r.branch, name, r.units[name], tg,
