@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -103,6 +104,39 @@ def _orbit_program(spec: cm.CollapsedSpec):
     return one
 
 
+def _mu_bucket(m: int) -> int:
+    """The μ count a program is compiled for: 8, or a multiple of 40 (:func:`_over_draws`)."""
+    return 8 if m <= 8 else -(-m // 40) * 40
+
+
+def _over_draws(name: str, one, items: tuple, key, mu_at: int):
+    """``lax.map(one, items)`` over the draws, in few compiled shapes.
+
+    :func:`~bayeshopf.inference.devices.mapped_call` (stored, the draws split
+    over the process's devices) in blocks of :data:`N_BAND_DRAWS` draws, with
+    ``items[mu_at]``, the μ of each draw ``(n, n_mu)``, padded to
+    :func:`_mu_bucket` ``(n_mu)`` by its last value: the training recordings of
+    either branch, a draw's fold, the diagram's grid and the 2,000 draws of
+    ``posterior.nc`` each reuse a program compiled for another (every new
+    shape is a compilation on a cold start). The outputs,
+    each with the draws on axis 0 and μ on axis 1, come back unpadded.
+    """
+    n, m = np.shape(items[mu_at])
+    pad_mu = _mu_bucket(m) - m
+    items = tuple(np.pad(a, ((0, 0), (0, pad_mu)), mode="edge") if i == mu_at and pad_mu
+                  else a for i, a in enumerate(items))
+    size = min(n, N_BAND_DRAWS)
+    blocks = []
+    for start in range(0, n, size):
+        rows = slice(start, min(start + size, n))
+        short = size - (rows.stop - rows.start)          # the last block, padded
+        block = jax.tree.map(lambda a, rows=rows, short=short: np.concatenate(
+            [a[rows], np.repeat(a[rows.stop - 1:rows.stop], short, 0)]), items)
+        out = mapped_call(name, one, block, key=key)
+        blocks.append(jax.tree.map(lambda r, k=size - short: np.asarray(r)[:k, :m], out))
+    return jax.tree.map(lambda *b: np.concatenate(b), *blocks)
+
+
 def _host(theta: dict) -> dict:
     """Draws as host arrays (:func:`~bayeshopf.inference.devices.mapped_call` places them)."""
     return {k: np.asarray(v, float) for k, v in theta.items()}
@@ -139,9 +173,9 @@ def orbit_coefficients(spec: cm.CollapsedSpec, theta: dict, betas, mu, sign: flo
     mu = np.asarray(mu, dtype=float) if per_draw else _per_draw(mu, n)
     # stored (inference.cache.compiled_call): a warm process neither traces nor lowers
     # it; the draws split over the process's devices (the CLI's: one per core)
-    c = np.asarray(mapped_call("orbits", _orbit_program(spec), (
+    c = _over_draws("orbits", _orbit_program(spec), (
         _host(theta), np.asarray(betas, float), mu, np.full(n, float(sign))),
-        key=_spec_key(spec)))
+        _spec_key(spec), mu_at=2)
     if control is None or spec.control_scale is None:
         return c
     cols = np.asarray(cm.control_columns(spec, np.asarray(control, float)))  # (n_mu, 2K+1, 2)
@@ -163,9 +197,9 @@ def frequency_draws(spec: cm.CollapsedSpec, theta: dict, gammas, mu, sign: float
     ensure_x64()
     n = np.shape(gammas)[0]
     mu = _per_draw(mu, n)
-    om = np.asarray(mapped_call("frequency-grid", _frequency_program(spec), (
+    om = _over_draws("frequency-grid", _frequency_program(spec), (
         _host(theta), np.asarray(gammas, float), mu, np.full(n, float(sign))),
-        key=_spec_key(spec)))
+        _spec_key(spec), mu_at=2)
     hz = om / (2 * np.pi)
     return frequency_noise(theta, hz, omega_se, seed) if predictive else hz
 
@@ -235,11 +269,11 @@ def discrepancy_moments(spec: cm.CollapsedSpec, theta: dict, betas, features: Ha
     mu = _per_draw(mu, n)
     ref_mu = np.asarray(features.mu, float)
     ref_sign = np.where(features.unstable, -1.0, 1.0)
-    return tuple(np.asarray(a) for a in mapped_call(
+    return tuple(_over_draws(
         "discrepancy", _discrepancy_program(spec),
         (_host(theta), np.asarray(betas, float), mu, np.full(n, float(sign)),
          np.broadcast_to(ref_mu, (n, ref_mu.size)), np.broadcast_to(ref_sign, (n, ref_sign.size))),
-        key=_spec_key(spec)))
+        _spec_key(spec), mu_at=2))
 
 
 def discrepancy_draws(spec: cm.CollapsedSpec, theta: dict, betas, features: HarmonicFeatures,
@@ -293,9 +327,9 @@ def network_draws(spec: cm.CollapsedSpec, theta: dict, mu, sign: float, seed: in
     M = 2 * spec.n_harmonics + 1
     if spec.nn_training is None:
         return np.zeros((n, mu.shape[1], 2, M))
-    var = np.asarray(mapped_call("network", _network_program(spec),
-                                 (_host(theta), mu, np.full(n, float(sign))),
-                                 key=_spec_key(spec)))                         # (n, n_mu, M)
+    var = _over_draws("network", _network_program(spec),
+                      (_host(theta), mu, np.full(n, float(sign))), _spec_key(spec),
+                      mu_at=1)                                                 # (n, n_mu, M)
     eps = _common_over_mu(np.random.default_rng([seed, 4]), (n, mu.shape[1], 2, M))
     return np.sqrt(var)[:, :, None, :] * eps
 
