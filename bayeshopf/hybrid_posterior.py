@@ -208,6 +208,7 @@ class HybridPosterior:
         ``(n_mu, 2)`` (a recording's control fundamental), the orbit held with
         that control, else the uncontrolled system's. With the discrepancy in
         μ, all of it at the model's point that the rig has at μ (:meth:`model_mu`).
+        Computed once per μ, branch, draws and control, and shared (read-only).
         """
         def compute(theta, idx, mu):
             c = orbit_coefficients(self.spec, theta, self.run.betas[idx],
@@ -238,8 +239,7 @@ class HybridPosterior:
         The figures, the predictive check and the summary share them.
         """
         mu = np.atleast_1d(np.asarray(mu, dtype=float))
-        held = b"" if control is None else np.asarray(control, float).tobytes()
-        key = (what, mu.tobytes(), branch, n_draws, held)
+        key = (what, mu.tobytes(), branch, n_draws, np.asarray(control, float).tobytes())
         memo = self._draw_memo
         if key not in memo:
             if len(memo) >= 64:
@@ -348,7 +348,8 @@ class HybridPosterior:
 
         The curve is ``Ω(r(μ), μ)/2π`` (:func:`~bayeshopf.model.collapsed.frequency`);
         ``predictive=True`` adds a new recording's error ``N(0, σ_ω² + se²)``, with
-        ``omega_se`` its standard error (rad/s; by default the training median).
+        ``omega_se`` its standard error (rad/s; by default the training median);
+        the curve is computed once per μ, branch and draws, and shared (read-only).
 
         Raises:
             FitError: For a fit without the frequency model.
