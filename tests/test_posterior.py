@@ -510,3 +510,45 @@ def test_the_network_at_infinite_width_fits_predicts_and_saves(planted_infinite_
     fit_folder.save_hybrid(post, tmp_path / "fit")
     p = fit_folder.load_fit(tmp_path / "fit").predict(beyond, "stable", predictive=True)
     np.testing.assert_allclose([p.lo, p.median, p.hi], b, rtol=1e-9)
+
+
+def test_predictions_in_blocks_of_draws_and_padded_mu_are_each_draw_at_each_mu_alone(
+        planted_discrepancy):
+    """The predictive programs run on blocks of draws with μ padded to a few compiled
+    sizes: orbits and frequencies of 1,100 draws at 9 μ (three blocks, the last padded; μ
+    padded to 40) are the model's formula for each draw at each μ alone; a training
+    recording's orbits from the fit's one computation per branch are those asked for at
+    its μ alone by a fresh copy of the fit; the shared arrays are read-only."""
+    import jax.numpy as jnp
+
+    from bayeshopf.model import collapsed as cm
+    from bayeshopf.predictive import frequency_draws, orbit_coefficients
+
+    post, _, truth = planted_discrepancy
+    spec, n = post.spec, 1100
+    take = np.resize(np.arange(post.run.betas.shape[0]), n)      # the draws, repeated
+    theta = {k: np.asarray(v)[take] for k, v in post.theta.items()}
+    betas, gammas = post.run.betas[take], post.run.gammas[take]
+    mu = np.linspace(truth.mu_fold, truth.mu0, 11)[1:-1]          # 9 points on both branches
+    c = orbit_coefficients(spec, theta, betas, mu, -1.0)
+    hz = frequency_draws(spec, theta, gammas, mu, -1.0)
+    assert c.shape == (n, 9, 2, 2 * spec.n_harmonics + 1) and hz.shape == (n, 9)
+    assert np.isfinite(c).mean() > 0.9 and np.isfinite(hz).mean() > 0.9   # the branch exists
+    for j in (0, 499, 500, 1000, 1099):                            # each block, the padded one
+        t = {k: jnp.asarray(v[j]) for k, v in theta.items()}
+        for k in (0, 4, 8):
+            m = jnp.asarray(mu[k:k + 1])
+            ref = jnp.einsum("mkj,jc->mck", cm.design(spec, m, -1.0, t), betas[j][:spec.n_basis])
+            np.testing.assert_allclose(c[j, k], np.asarray(ref)[0], rtol=1e-9, atol=1e-12)
+            om = cm.frequency(spec, t, jnp.asarray(gammas[j]), m, -1.0)
+            np.testing.assert_allclose(hz[j, k], float(om[0]) / (2 * np.pi), rtol=1e-12)
+    fresh = replace(post)                                          # nothing computed yet
+    f = post.features
+    for i in range(f.n_recordings):
+        branch = "unstable" if f.unstable[i] else "stable"
+        alone = fresh.orbit_coefficients([f.mu[i]], branch,
+                                         control=fresh.recording_control(i))[:, 0]
+        np.testing.assert_allclose(post.training_coefficients[i], alone, rtol=1e-10,
+                                   atol=1e-14)
+    with pytest.raises(ValueError, match="read-only"):
+        post.training_coefficients[0][...] = 0.0
