@@ -116,6 +116,27 @@ def test_importance_on_the_demo_agrees_with_nuts(demo_importance):
     assert all(v["agree"] for v in agree.values()), agree
 
 
+def test_a_fit_that_misses_the_orbits_says_to_compare_with_nuts(demo_importance):
+    """With a relative model error above the limit, a fit by importance sampling warns that
+    its draws about the MAP may miss posterior mass, and says how to compare with NUTS; the
+    same fit by NUTS does not."""
+    from dataclasses import replace
+
+    from bayeshopf.diagnostics.fit_checks import SIGMA_REL_MAX, diagnose
+
+    fit, nuts_fit = demo_importance
+
+    def warned(post):
+        chains = {**post.run.chains, "sigma_rel": post.run.chains["sigma_rel"] + SIGMA_REL_MAX}
+        return [w for w in diagnose(replace(post, run=replace(post.run, chains=chains)))[
+            "warnings"] if w.startswith("posterior: importance sampling")]
+
+    assert not [w for w in diagnose(fit)["warnings"] if w.startswith("posterior: importance")]
+    (w,) = warned(fit)
+    assert "--nuts-check" in w
+    assert warned(nuts_fit) == []
+
+
 def test_a_failed_check_runs_nuts_and_says_why(demo_importance, monkeypatch):
     from bayeshopf.inference import nuts
     from bayeshopf.inference.settings import model_arguments

@@ -228,6 +228,11 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
                            "calibrated for such a fit")
                         + " (check them by leave-one-out: bayeshopf.validation.leave_one_out); "
                         + HOPF_FOLD_CAVEAT)
+    if rel > SIGMA_REL_MAX and run.method == "importance":
+        warnings.append("posterior: importance sampling draws about the MAP, and the posterior "
+                        "of a fit that misses the orbits this much can hold mass the draws do "
+                        "not reach, which its check cannot see; compare with NUTS (fit "
+                        "--nuts-check, or --inference nuts; docs/inference.md)")
     d["warnings"] = warnings
     return d
 
