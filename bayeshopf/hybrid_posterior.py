@@ -211,23 +211,17 @@ class HybridPosterior:
         Computed once per μ, branch, draws and control, and shared (read-only).
         """
         def compute(theta, idx, mu):
-            c = orbit_coefficients(self.spec, theta, self.run.betas[idx],
-                                   self.model_mu(mu, branch, n_draws), branch_sign(branch),
-                                   per_draw=True, control=control)
+            at = self.model_mu(mu, branch, n_draws)
+            c = orbit_coefficients(self.spec, theta, self.run.betas[idx], at,
+                                   branch_sign(branch), per_draw=True, control=control)
             if self.spec.nn_training is not None:
-                c = c + self._network(mu, branch, n_draws)
+                c = c + network_draws(self.spec, theta, at, branch_sign(branch), self.seed)
             if self.spec.has_discrepancy:
                 c = c + self._discrepancy(mu, branch, n_draws)[0]
             c.flags.writeable = False         # shared by every caller (memo)
             return c
 
         return self._memo("orbits", mu, branch, n_draws, compute, control)
-
-    def _network(self, mu, branch: str, n_draws: int | None = N_BAND_DRAWS):
-        """:func:`network_draws` at μ for the draws of ``n_draws``, once per μ and branch."""
-        return self._memo("network", mu, branch, n_draws, lambda theta, idx, mu: network_draws(
-            self.spec, theta, self.model_mu(mu, branch, n_draws), branch_sign(branch),
-            self.seed))
 
     @cached_property
     def _draw_memo(self) -> dict:
