@@ -7,7 +7,7 @@
 
 The data flow one way: recordings -> phase-aligned harmonic features -> model
 (normal form, map and frequency integrated out, model discrepancy) ->
-inference (start, MAP, NUTS or SVI) -> posterior and predictive -> plots and
+inference (start, MAP, importance sampling, NUTS or SVI) -> posterior and predictive -> plots and
 reports, with simulators, the missing-physics analysis and experimental design
 beside it.
 

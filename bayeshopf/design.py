@@ -9,14 +9,10 @@ similar amplitude (its segments' standard error) and the model discrepancy.
 Write ``τ_s`` for that scatter's standard deviation (estimated from
 :data:`N_REPLICATES` replicates per draw).
 
-The model error away from the recordings enters at its base scale
-(:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`, or the scale the fit was
-given), not at the wider scale the draws of a fit whose relative model error
-is above its limit take for bands of new measurements
-(:func:`~bayeshopf.predictive.default_extrapolation_scale`): as scatter in
-``τ_s`` that wider scale would discount every candidate away from the
-recordings, near the fold most, in fits of a few recordings whose relative
-model error is still near its prior. With the model discrepancy
+The extra model error away from the recordings enters at the fit's own scale
+(:attr:`~bayeshopf.posterior.HybridPosterior.extrapolation_scale`: none with
+the model discrepancy, :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`
+without it, or the scale the fit was given). With the model discrepancy
 (:mod:`bayeshopf.model.discrepancy`) each draw's amplitude instead includes a
 draw of the discrepancy at the candidate, the same that ``predict`` and the
 diagram's bands use.
@@ -90,7 +86,6 @@ import numpy as np
 
 from bayeshopf.diagnostics.summaries import CI
 from bayeshopf.errors import FitError
-from bayeshopf.model import collapsed as cm
 from bayeshopf.predictive import N_BAND_DRAWS as N_DRAWS  # the bands' draws, aligned
 
 __all__ = ["Candidate", "DesignResult", "NO_GAIN_SE", "TARGETS", "candidate_grid",
@@ -321,9 +316,7 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     from bayeshopf import predictive as pr
 
     c = np.repeat(coeffs[:, None], N_REPLICATES, axis=1)            # (S, R, 1, 2, 2K+1)
-    scale = fit.settings.extrapolation_scale
-    if scale is None:        # the base scale, not the rule's wider one (module docstring)
-        scale = 0.0 if fit.spec.has_discrepancy else cm.EXTRAPOLATION_SCALE
+    scale = fit.extrapolation_scale
     if fit.settings.extrapolation and scale > 0:
         f = fit.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
@@ -332,7 +325,8 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
                                          scale=scale)
         c = pr.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
     if fit.spec.has_discrepancy:
-        sd = fit._noise_sd(coeffs, se, [mu], branch)[:, None]        # (S, 1, 1, 2, 2K+1)
+        post = getattr(fit, "posterior", fit)     # a front door's Fit holds its posterior
+        sd = post._noise_sd(coeffs, se, [mu], branch)[:, None]       # (S, 1, 1, 2, 2K+1)
     else:
         idx = pr.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
         sd = pr.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],

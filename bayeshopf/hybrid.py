@@ -7,7 +7,7 @@
 >>> fit.predict([15.0, 16.0], branch="stable", ci=0.9)          # doctest: +SKIP
 >>> fit.save("fit_out/"); bh.load_fit("fit_out/")               # doctest: +SKIP
 
-:func:`fit` runs the whole pipeline (features, MAP, NUTS or SVI, checks) as
+:func:`fit` runs the whole pipeline (features, MAP, posterior draws, checks) as
 :func:`bayeshopf.posterior.fit_hybrid` does, after giving JAX and the linear
 algebra libraries their CPU settings (:func:`~bayeshopf.inference.cache.configure_xla_cpu`),
 so user code does not have to. :class:`Fit` wraps the
@@ -212,7 +212,8 @@ def fit(recordings, settings: Settings | None = None, *, criticality: str = "sub
     """Fit the Bayesian hybrid normal-form model to LCO recordings.
 
     Stages: phase-aligned harmonic features, a deterministic start and the MAP,
-    NUTS (or SVI) on the normal form's parameters with the map integrated out,
+    importance sampling (NUTS where its check fails; or NUTS, or SVI) on the normal
+    form's parameters with the map and the model discrepancy integrated out,
     one exact map draw per posterior draw, and the checks
     (:func:`~bayeshopf.posterior.fit_hybrid`). JAX's CPU settings are made here
     (:func:`~bayeshopf.inference.cache.configure_xla_cpu`); they take effect

@@ -33,7 +33,6 @@ from bayeshopf.predictive import (
     N_BAND_DRAWS,
     _common_over_mu,
     amplitude_of,
-    default_extrapolation_scale,
     discrepancy_draws,
     draw_indices,
     extrapolation_factor,
@@ -42,7 +41,6 @@ from bayeshopf.predictive import (
     network_draws,
     noise_sd,
     orbit_coefficients,
-    rms_scale,
     scale_orbits,
 )
 
@@ -111,33 +109,26 @@ class HybridPosterior:
         return np.asarray(s.get(name + RIG, s[name]))
 
     def extrapolation_scales(self, n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
-        """The scale ``S`` of the model error away from the recordings, per draw.
+        """The scale ``S`` of the extra model error away from the recordings, per draw.
 
-        For the draws :meth:`orbit_coefficients` uses with ``n_draws``:
-        ``settings.extrapolation_scale`` when it is set (a user's override);
-        otherwise 0 for a model with the discrepancy, whose Gaussian process
-        already widens the bands away from the recordings, and for one without
-        it chosen by each draw's relative model error
-        (:func:`default_extrapolation_scale`).
+        For the draws :meth:`orbit_coefficients` uses with ``n_draws``, all equal
+        to :attr:`extrapolation_scale`.
         """
-        idx = self._draw_indices(n_draws)
-        s = self.settings.extrapolation_scale
-        if s is not None or self.spec.has_discrepancy:
-            return np.full(len(idx), 0.0 if s is None else float(s))
-        return default_extrapolation_scale(np.asarray(self.samples["sigma_rel"])[idx])
+        return np.full(len(self._draw_indices(n_draws)), self.extrapolation_scale)
 
     @property
     def extrapolation_scale(self) -> float:
-        """The rms of :meth:`extrapolation_scales` over all draws (:func:`rms_scale`).
+        """The scale ``S`` of the extra model error away from the recordings.
 
-        The setting when it is set (see :meth:`extrapolation_scales` otherwise).
+        ``settings.extrapolation_scale`` when it is set (a user's override);
+        otherwise 0 with the discrepancy, whose Gaussian process already widens the
+        bands away from the recordings, and
+        :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` without it.
         """
-        return rms_scale(self.extrapolation_scales(None))
-
-    @property
-    def p_misfit(self) -> float:
-        """The posterior probability that the relative model error σ_rel is above its 2% limit."""
-        return float(np.mean(np.asarray(self.samples["sigma_rel"]) > cm.SIGMA_REL_LIMIT))
+        s = self.settings.extrapolation_scale
+        if s is not None:
+            return float(s)
+        return 0.0 if self.spec.has_discrepancy else cm.EXTRAPOLATION_SCALE
 
     def interval(self, name: str, mass: float = 0.9) -> Interval | None:
         """Median and central interval of a site (``mu0``, ``a2``, ``mu_fold``, …), or None.

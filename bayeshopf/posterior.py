@@ -1,4 +1,4 @@
-"""The whole job on the collapsed core: recordings → harmonics → MAP → NUTS → posterior.
+"""The whole job on the collapsed core: recordings → harmonics → MAP → draws → posterior.
 
 >>> import bayeshopf.posterior as bp
 >>> post = bp.fit_hybrid(recordings, "subcritical", seed=0)    # doctest: +SKIP
@@ -144,8 +144,8 @@ def fit_hybrid(
     """Fit the Bayesian hybrid normal-form model on the collapsed core.
 
     Stages: phase-aligned harmonic features; a deterministic start and the MAP
-    (:func:`~bayeshopf.inference.collapsed.fit_map`); NUTS (or SVI) on the
-    nonlinear parameters with the map integrated out; one exact map draw per
+    (:func:`~bayeshopf.inference.collapsed.fit_map`); importance sampling, NUTS
+    or SVI on the nonlinear parameters with the map integrated out; one exact map draw per
     posterior draw; diagnostics.
 
     Args:

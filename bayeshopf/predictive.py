@@ -46,38 +46,6 @@ def _common_over_mu(rng, shape) -> np.ndarray:
     return rng.standard_normal((shape[0], 1) + tuple(shape[2:]))
 
 
-def default_extrapolation_scale(sigma_rel, *, base: float = cm.EXTRAPOLATION_SCALE,
-                                misfit: float = cm.EXTRAPOLATION_SCALE_MISFIT,
-                                limit: float = cm.SIGMA_REL_LIMIT) -> np.ndarray:
-    """The scale ``S`` of the model error away from the recordings per draw (no discrepancy).
-
-    For a fit without the model discrepancy: ``S = 0.7`` in a draw whose relative
-    model error σ_rel is above the 2% limit and ``S = 0.1`` in the others
-    (:data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT`,
-    :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE`,
-    :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`), so that a new
-    measurement's band averages over whether the fit misses the orbits' sizes.
-    Both constants were set from simulated rigs' held-out residuals; the model
-    discrepancy (:mod:`bayeshopf.model.discrepancy`) is to replace the rule.
-
-    Args:
-        sigma_rel: Posterior draws of σ_rel.
-        base: The scale of a draw within the limit.
-        misfit: The scale of a draw above it.
-        limit: The limit of σ_rel (a saved fit passes its own three values).
-    """
-    return np.where(np.asarray(sigma_rel, dtype=float) > limit, misfit, base)
-
-
-def rms_scale(scales) -> float:
-    """``sqrt(mean S²)``: the sd of the log factor per unit ``c`` when ``S`` varies by draw.
-
-    ``E[s²] = S²`` for ``s ~ HalfNormal(S)``.
-    """
-    s = np.asarray(scales, dtype=float)
-    return float(s[0]) if np.all(s == s[0]) else float(np.sqrt(np.mean(np.square(s))))
-
-
 def draw_indices(total: int, n: int | None = N_BAND_DRAWS) -> np.ndarray:
     """``n`` draw indices spread evenly over ``total`` (all of them when ``n ≥ total``)."""
     if n is None or n >= total:

@@ -1,7 +1,7 @@
 """Wall time of the CLI as a user meets it: ``bayeshopf fit`` on the rig cold and warm, demo cold.
 
 Run: ``python benchmarks/bench_cli_speed.py [--repeat N] [--fusion-emitters] [--label L]
-[--out FILE] [--fit-args "--discrepancy --nn-width inf"]``
+[--out FILE] [--fit-args "--no-discrepancy --nn-width 16 --inference nuts"]``
 on an otherwise idle machine. Each run is a fresh process; "cold" uses an empty compilation cache
 (``BAYESHOPF_CACHE_DIR`` set to a new temporary folder), "warm" runs again on the
 cache the cold run filled. Prints a Markdown table and writes

@@ -18,8 +18,9 @@ per block (at the block's first ``nn_seed``, which it does not read).
 
 Each row (but the ``rig`` block's) is one fit of the demo's recordings
 (``flutter_experiment(seed=0)``, what ``bayeshopf demo`` fits) with
-``bayeshopf.fit(..., settings=Settings(nn_width=H, nn_seed=s), seed=0)``, every
-other setting the default (``--discrepancy``: ``discrepancy=True``), one fit
+``bayeshopf.fit(..., settings=Settings(nn_width=H, nn_seed=s, inference="nuts",
+discrepancy=False), seed=0)``, every other setting the default (``--discrepancy``:
+``discrepancy=True``), one fit
 after another in one process. It records the median and 90% interval of μ0
 and the fold, their widths, whether each holds the simulator's value, the wall
 time, NUTS's draws per chain, mean leapfrog steps, divergences, the sites
@@ -87,7 +88,7 @@ def fit_row(rs, truth: dict, block: str, width: int, seed: int, discrepancy: boo
     import bayeshopf as bh
 
     settings = bh.Settings(nn_width=None if width == "inf" else width, nn_seed=seed,
-                           discrepancy=discrepancy)
+                           discrepancy=discrepancy, inference="nuts")
     t0 = time.perf_counter()
     fit = bh.fit(rs, settings=settings, seed=fit_seed, progress=False)
     wall = time.perf_counter() - t0

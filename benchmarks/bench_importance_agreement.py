@@ -5,8 +5,9 @@
 
 Each data set is the nominal 3-DOF aerofoil simulated by
 :func:`bayeshopf.simulators.truth.flutter_experiment` (``seed``: its phases, noise
-and sensor offsets), fitted with ``Settings(inference="importance")``
-(``--model discrepancy``: with ``discrepancy=True, nn_width=None`` as well), seed
+and sensor offsets), fitted with
+``Settings(inference="importance", discrepancy=False, nn_width=16)``
+(``--model discrepancy``: with ``discrepancy=True, nn_width=None``), seed
 0, then NUTS on the same model from the same MAP point
 (:func:`bayeshopf.inference.collapsed.compare_with_nuts`, the CLI's
 ``--nuts-check``). Recorded per data set: the method that ran (importance
@@ -41,7 +42,8 @@ def one(seed: int, model: str) -> dict:
     from bayeshopf.simulators.truth import flutter_experiment
 
     rs, _ = flutter_experiment(seed=seed)
-    extra = {"discrepancy": True, "nn_width": None} if model == "discrepancy" else {}
+    extra = ({"discrepancy": True, "nn_width": None} if model == "discrepancy" else
+             {"discrepancy": False, "nn_width": 16})       # the default before session 78
     fit = bh.fit(rs, settings=bh.Settings(inference="importance", **extra), seed=0,
                  progress=False)
     post = fit.posterior

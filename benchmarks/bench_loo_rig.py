@@ -1,7 +1,8 @@
 """Leave-one-out on the wind-tunnel rig: coverage, width and log predictive density.
 
-Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--discrepancy]
-[--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U] [--own-too]``.
+Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--no-discrepancy]
+[--inference M] [--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U]
+[--own-too]``.
 Each of the rig's 7 recordings is held out in turn, the model refitted on the
 others (seed 0) and the held-out amplitude predicted with its 90% band
 (``bayeshopf.validation.leave_one_out``, the refits kept). The log predictive
@@ -41,8 +42,10 @@ def main(argv):
     if "--extrapolation-scale" in argv:
         settings = replace(settings,
                            extrapolation_scale=float(argv[argv.index("--extrapolation-scale") + 1]))
-    if "--discrepancy" in argv:
-        settings = replace(settings, discrepancy=True)
+    if "--no-discrepancy" in argv:
+        settings = replace(settings, discrepancy=False)
+    if "--inference" in argv:
+        settings = replace(settings, inference=argv[argv.index("--inference") + 1])
     if "--nn-width" in argv:
         w = argv[argv.index("--nn-width") + 1]
         settings = replace(settings, nn_width=None if w == "inf" else int(w))

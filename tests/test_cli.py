@@ -348,14 +348,10 @@ def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, mon
     printed = capsys.readouterr().out
     assert "80% interval" in printed and "predicted (80%)" in printed
     assert "inside their 80% predictive intervals" in printed
-    # the scale of the model error away from the recordings, per draw by σ_rel
-    away = s["diagnostics"]["fit"]["extrapolation_scale"]
-    assert away["scale"] == pytest.approx(post.extrapolation_scale, rel=1e-12)
-    assert away["p_above_limit"] == pytest.approx(post.p_misfit)
-    assert (f"bands of new measurements away from the recordings: model-error scale "
-            f"{post.extrapolation_scale:.2g} (the rms over the draws: 0.7 in the "
-            f"{100 * post.p_misfit:.0f}% whose relative model error is above the 2% limit"
-            in printed)
+    # with the discrepancy (the default) no extra model error away from the recordings
+    assert post.spec.has_discrepancy and post.extrapolation_scale == 0.0
+    assert "extrapolation_scale" not in s["diagnostics"]["fit"]
+    assert "bands of new measurements away from the recordings" not in printed
     assert main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--ci", "90"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ci 90" in err
@@ -388,9 +384,14 @@ def test_removed_and_misused_options_are_one_line_errors(good_data, tmp_path, ca
     with pytest.raises(SystemExit):           # --speed went with the legacy core: Ω is built in
         main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--speed"])
     assert "unrecognized arguments: --speed" in capsys.readouterr().err
-    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--nuts-check", "--quiet"])
+    code = main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--nuts-check", "--quiet",
+                 "--inference", "nuts"])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and len(err.splitlines()) == 1 and "needs --inference importance or svi" in err
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "needs --inference importance (the default) or svi" in err
+    with pytest.raises(SystemExit):           # the discrepancy is the default: --no-discrepancy
+        main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--discrepancy"])
+    assert "unrecognized arguments: --discrepancy" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
@@ -506,7 +507,7 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
     assert (out / "figures" / "leave_one_out.png").is_file() is figures
     assert seen["features"] is post.features and seen["criticality"] == "subcritical"
     assert seen["seed"] == 1 and seen["methods"] == ("bayes",)
-    assert seen["settings"].inference == "nuts" and seen["settings"].control is True
+    assert seen["settings"].inference == "importance" and seen["settings"].control is True
     s = json.loads((out / "summary.json").read_text())
     n = len(s["recordings"])
     loo = s["leave_one_out"]
@@ -546,13 +547,15 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
     seen.clear()
     assert main(["demo", "--fast", "--out", str(tmp_path / "b"), "--no-figures"]) == 2
     capsys.readouterr()
-    assert seen["settings"].extrapolation_scale is None      # chosen by the fit's σ_rel
-    assert seen["settings"].discrepancy is False              # not yet the default
+    assert seen["settings"].extrapolation_scale is None      # none with the discrepancy
+    assert seen["settings"].discrepancy is True and seen["settings"].nn_width is None
+    assert seen["settings"].inference == "importance"
     seen.clear()
     assert main(["demo", "--fast", "--out", str(tmp_path / "d"), "--no-figures",
-                 "--discrepancy"]) == 2
+                 "--no-discrepancy", "--nn-width", "16", "--inference", "nuts"]) == 2
     capsys.readouterr()
-    assert seen["settings"].discrepancy is True
+    assert seen["settings"].discrepancy is False and seen["settings"].nn_width == 16
+    assert seen["settings"].inference == "nuts"
     for bad in ("0", "-1", "nan"):
         seen.clear()
         assert main(["demo", "--fast", "--out", str(tmp_path / "c"), "--no-figures",
@@ -564,7 +567,7 @@ def test_extrapolation_scale_reaches_the_fit_and_is_checked(tmp_path, monkeypatc
 
 def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, capsys):
     """``--mu-discrepancy`` sets κ of the discrepancy in μ (2 by default) and
-    ``--mu-discrepancy-floor`` its floor φ (0.05); without ``--discrepancy``,
+    ``--mu-discrepancy-floor`` its floor φ (0.05); with ``--no-discrepancy``,
     negative or not finite each is a one-line error before any fit."""
     import bayeshopf.posterior
     from bayeshopf.errors import FitError
@@ -576,7 +579,7 @@ def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, ca
         raise FitError("stopped by the test")
 
     monkeypatch.setattr(bayeshopf.posterior, "fit_hybrid", stop)
-    base = ["demo", "--fast", "--no-figures", "--discrepancy"]
+    base = ["demo", "--fast", "--no-figures"]
     assert main([*base, "--out", str(tmp_path / "a"), "--mu-discrepancy", "0.5",
                  "--mu-discrepancy-floor", "0"]) == 2
     capsys.readouterr()
@@ -590,8 +593,8 @@ def test_mu_discrepancy_reaches_the_fit_and_is_checked(tmp_path, monkeypatch, ca
     for flag in ("--mu-discrepancy", "--mu-discrepancy-floor"):
         for args, why in (([*base, flag, "-1"], "a finite number ≥ 0 expected"),
                           ([*base, flag, "inf"], "a finite number ≥ 0 expected"),
-                          (["demo", "--fast", "--no-figures", flag, "1"],
-                           "needs --discrepancy")):
+                          ([*base, "--no-discrepancy", flag, "1"],
+                           "which --no-discrepancy removes")):
             seen.clear()
             assert main([*args, "--out", str(tmp_path / "c")]) == 2
             err = capsys.readouterr().err.strip()

@@ -362,14 +362,14 @@ def test_stored_notebook_is_a_full_run_whose_numbers_are_the_docs():
     readme = (REPO / "docs" / "limits.md").read_text()
     text = run.text
     # the blind run's hybrid fit, quoted in the limits
-    assert "hybrid fit of the recordings: hopf 17.194 [17.188, 17.203]; fold 14.144 " \
-           "[13.985, 14.252]" in text
-    assert "Hopf 17.194 [17.188, 17.203] m/s, fold 14.144 [13.985, 14.252] m/s" in \
-        " ".join(readme.split())
-    # the rig: the hybrid fit's fold (with the control term) as the limits give it; the
-    # verdict and the calibrated simulator's fold
-    assert "fold 14.256 [13.792, 14.513]" in text and "14.26 [13.79, 14.51] m/s with it, as " \
-        "notebook 04's stored run has it" in " ".join(readme.split())
+    assert "hybrid fit of the recordings: hopf 17.193 [17.149, 17.245]; fold 14.175 " \
+           "[13.772, 14.499]" in text
+    assert "(the default; notebook 04's stored run) Hopf 17.193 [17.149, 17.245] m/s, fold " \
+           "14.175 [13.772, 14.499] m/s" in " ".join(readme.split())
+    # the rig: the hybrid fit's points (with the control term and the discrepancy) as the
+    # limits give them; the verdict and the calibrated simulator's fold
+    assert "hopf 16.995 [16.668, 18.038]; fold 14.256 [13.304, 14.627]" in text
+    assert "17.00 [16.67, 18.04] and 14.26 [13.30, 14.63] m/s" in " ".join(readme.split())
     assert "neither its parameters nor a library term explain: a smooth discrepancy of the " \
            "orbits' fundamentals of 26%" in text
     assert "calibrated Hopf 17.043 m/s, fold 15.441 m/s" in text

@@ -97,9 +97,9 @@ def test_non_finite_potentials_get_no_weight():
 def demo_importance(fast_demo_fit):
     from bayeshopf.posterior import fit_hybrid
 
-    nuts_fit, rs, _ = fast_demo_fit
-    settings = dataclasses.replace(nuts_fit.settings, inference="importance")
-    return fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False), nuts_fit
+    fit, rs, _ = fast_demo_fit          # the default: importance sampling
+    settings = dataclasses.replace(fit.settings, inference="nuts")
+    return fit, fit_hybrid(rs, "subcritical", seed=0, settings=settings, progress=False)
 
 
 def test_importance_on_the_demo_agrees_with_nuts(demo_importance):
@@ -135,6 +135,26 @@ def test_a_fit_that_misses_the_orbits_says_to_compare_with_nuts(demo_importance)
     (w,) = warned(fit)
     assert "--nuts-check" in w
     assert warned(nuts_fit) == []
+
+
+def test_importance_without_the_discrepancy_says_to_compare_with_nuts(demo_importance):
+    """Without the discrepancy importance sampling can miss μ0's upper tail (docs/inference.md):
+    such a fit says so in a ``posterior:`` warning; the same draws of a model with the
+    discrepancy, and NUTS's, do not."""
+    from dataclasses import replace
+
+    from bayeshopf.diagnostics.fit_checks import diagnose
+
+    fit, nuts_fit = demo_importance
+
+    def lines(post, discrepancy):
+        if not discrepancy:        # the same draws read as a model without it
+            post = replace(post, spec=replace(post.spec, discrepancy_scale=None))
+        return [w for w in diagnose(post)["warnings"] if "without the discrepancy" in w]
+
+    (w,) = lines(fit, False)
+    assert w.startswith("posterior: importance sampling") and "--inference nuts" in w
+    assert lines(fit, True) == [] and lines(nuts_fit, False) == []
 
 
 def test_a_failed_check_runs_nuts_and_says_why(demo_importance, monkeypatch):

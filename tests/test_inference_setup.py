@@ -421,7 +421,8 @@ from bayeshopf import _preload
 from bayeshopf.inference import cache, collapsed as ci, devices, programs
 mp = pytest.MonkeyPatch()
 _, _, start = t._banana(mp)
-settings = replace(ci.CollapsedSettings(), num_chains=4, num_warmup=100, num_samples=100,
+settings = replace(ci.CollapsedSettings(), inference="nuts", num_chains=4, num_warmup=100,
+                   num_samples=100,
                    extend_samples=100, max_samples=100)
 key = jax.random.PRNGKey(5)
 """

@@ -2,13 +2,14 @@
 
 One fit of the collapsed core at its default settings (seed 0): the call a user
 makes. The bars are issue 19's: every amplitude and frequency inside its 90%
-predictive band, every orbit within 5% (or twice its segment spread), and NUTS
-converged. The criticality comparison (``fit_auto``) is checked in the slow
+predictive band, every orbit within 5% (or twice its segment spread), and the
+posterior's check passed. The criticality comparison (``fit_auto``) is checked in the slow
 ``test_wind_tunnel_validation``.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from bayeshopf.diagnostics.pair_invariant import invariant_line, pair_invariants
@@ -32,12 +33,13 @@ def test_all_seven_amplitudes_and_frequencies_inside_their_bands(post):
     assert len(freq) == 7 and all(e["inside_ci90"] for e in freq), freq
 
 
-def test_nuts_converged_on_the_rig(post):
+def test_the_posterior_passed_its_check_on_the_rig(post):
+    """Importance sampling (the default) passed its check, so NUTS was not needed."""
+    from bayeshopf.inference import importance, nuts
+
     d = post.diagnostics["posterior"]
-    assert d["method"] == "nuts" and d["chains"] == 4
-    for name in ("mu0", "a2", "mu_fold"):
-        site = d["sites"][name]
-        assert site["r_hat"] <= 1.01 and site["ess_bulk"] >= 400, (name, site)
+    assert d["method"] == "importance", d
+    assert d["pareto_k"] <= importance.K_MAX and d["ess"] >= nuts.ESS_MIN, d
 
 
 def test_all_seven_orbits_fitted(post):
@@ -91,15 +93,16 @@ def test_map_free_pair_invariant_of_the_rig(post):
     The line through the pairs assumes the paper's linear unfolding; it puts μ0
     at 17.3–17.5 m/s and predicts the unstable 16.5 m/s orbit from the pairs at
     14.9 and 15.7 m/s too large (docs/validation.md, "Why the unstable 16.5 m/s orbit"). The
-    fit's curved unfolding bends through all three pairs instead, so its μ0 lies
-    below the line's (docs/limits.md): asserted here, so that a change of either
-    shows.
+    fit's curved unfolding bends through all three pairs instead, so its normal
+    form's own μ0 lies below the line's (docs/limits.md): asserted here, so that a
+    change of either shows. (The rig's μ0, moved by the discrepancy in μ, reaches
+    above it.)
     """
     pairs = pair_invariants(post.features)
     assert [round(p.mu, 1) for p in pairs] == [14.9, 15.7, 16.5]
     line = invariant_line(pairs).interval("mu0")
     assert 17.2 < line.lo < line.hi < 17.6, line
-    assert post.interval("mu0").hi < line.lo
+    assert np.quantile(post.samples["mu0"], 0.95) < line.lo
     held = pairs[2]
     pred = invariant_line(pairs[:2]).unstable_amplitude(held.mu, held.stable_amplitude)
     assert pred.lo > held.unstable_amplitude, (pred, held.unstable_amplitude)

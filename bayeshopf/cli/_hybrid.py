@@ -40,11 +40,11 @@ def fit_groups(p: argparse.ArgumentParser) -> FitGroups:
 
 def add_fit_options(g: FitGroups) -> None:
     """The options ``fit`` and ``demo`` share, each in its section."""
-    g.inference.add_argument("--inference", choices=("nuts", "importance", "svi"),
-                             default="nuts",
-                             help="posterior: NUTS (default); importance sampling from the "
-                             "MAP's Laplace approximation, Pareto-smoothed (NUTS where its "
-                             "check fails); or SVI with a full-rank Gaussian guide")
+    g.inference.add_argument("--inference", choices=("importance", "nuts", "svi"),
+                             default="importance",
+                             help="posterior: importance sampling from the MAP's Laplace "
+                             "approximation, Pareto-smoothed, with NUTS where its check fails "
+                             "(default); NUTS; or SVI with a full-rank Gaussian guide")
     g.inference.add_argument("--nuts-check", action="store_true",
                              help="with --inference importance or svi: also run NUTS on the "
                              "same model and report whether the 90%% intervals match NUTS's "
@@ -55,28 +55,26 @@ def add_fit_options(g: FitGroups) -> None:
                              "converged")
 
     g.model.add_argument("--nn-width", default=None, metavar="H",
-                         help="hidden units of the map's network (default 16), or 'inf' for "
+                         help="hidden units of the map's network, or 'inf' (the default) for "
                          "its limit of infinite width, a Gaussian process with the network's "
                          "kernel that has no hidden layer to draw (docs/model.md)")
-    g.model.add_argument("--discrepancy", action="store_true",
-                         help="fit with the model discrepancy, a Gaussian process over the "
-                         "diagram on the orbits' fundamental whose scale is sampled with the "
-                         "Hopf point and the fold (docs/model_discrepancy.md; not yet the "
-                         "default)")
+    g.model.add_argument("--no-discrepancy", dest="discrepancy", action="store_false",
+                         help="fit without the model discrepancy (docs/model_discrepancy.md): "
+                         "the normal form and map exact up to a relative model error of each "
+                         "coefficient, the Hopf point and the fold the normal form's own "
+                         "(best with --inference nuts, docs/inference.md)")
     g.model.add_argument("--mu-discrepancy", type=float, default=None, metavar="K",
-                         help="with --discrepancy: κ of its twin in μ, which moves the Hopf "
-                         "point and the fold by the model's error beyond the recordings "
-                         "(default 2; 0 reports the normal form's own points)")
+                         help="κ of the discrepancy's twin in μ, which moves the Hopf point "
+                         "and the fold by the model's error beyond the recordings (default 2; "
+                         "0 reports the normal form's own points)")
     g.model.add_argument("--mu-discrepancy-floor", type=float, default=None, metavar="PHI",
-                         help="with --discrepancy: φ, the floor on the discrepancy's scale η "
-                         "in that error, κ√(η² + φ²) times the fold–Hopf gap (default 0.05; "
-                         "0: none)")
+                         help="φ, the floor on the discrepancy's scale η in that error, "
+                         "κ√(η² + φ²) times the fold–Hopf gap (default 0.05; 0: none)")
     g.model.add_argument("--extrapolation-scale", type=float, default=None, metavar="S",
-                         help="half-normal scale of the model error away from the recordings, "
-                         "in log orbit size (default: per posterior draw 0.1, or 0.7 where "
-                         "the fit's relative model error is above 2%%; none with "
-                         "--discrepancy): it widens new measurements' bands between and "
-                         "beyond the recordings only")
+                         help="half-normal scale of an extra model error away from the "
+                         "recordings, in log orbit size, that widens new measurements' bands "
+                         "between and beyond the recordings only (default: none; 0.1 with "
+                         "--no-discrepancy)")
 
     g.outputs.add_argument("--force", action="store_true",
                            help="write into a non-empty output folder (replaces bayeshopf's "
@@ -104,14 +102,13 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
     """
     if getattr(args, "nuts_check", False) and args.inference == "nuts":
         raise FitError("--nuts-check compares importance sampling or SVI with NUTS and needs "
-                       "--inference importance or svi; got --inference nuts (the default), "
+                       "--inference importance (the default) or svi; got --inference nuts, "
                        "whose R̂ and ESS are reported anyway")
     check_ci(args.ci, error=FitError)
     scale = getattr(args, "extrapolation_scale", None)
     if scale is not None and not (math.isfinite(scale) and scale > 0):
         raise FitError(f"--extrapolation-scale {scale:g}: a positive number expected (by "
-                       "default per draw 0.1, or 0.7 where the relative model error is above "
-                       "2%)")
+                       "default none, 0.1 with --no-discrepancy)")
     if getattr(args, "nn_width", None) is not None:
         _nn_width(args.nn_width)
     for flag, default in (("mu_discrepancy", "default 2; 0: the normal form's own Hopf point "
@@ -119,8 +116,8 @@ def run_hybrid(rs, criticality, args, out, truth=None, extra=None) -> dict:
         k, opt = getattr(args, flag, None), "--" + flag.replace("_", "-")
         if k is not None and not (math.isfinite(k) and k >= 0):
             raise FitError(f"{opt} {k:g}: a finite number ≥ 0 expected ({default})")
-        if k is not None and not getattr(args, "discrepancy", False):
-            raise FitError(f"{opt} sets the discrepancy in μ, which needs --discrepancy")
+        if k is not None and not getattr(args, "discrepancy", True):
+            raise FitError(f"{opt} sets the discrepancy in μ, which --no-discrepancy removes")
     check_out(out, args.force)
     worker = None
     if not args.no_figures:   # imports beside NUTS, and a figure process
@@ -139,7 +136,7 @@ def _settings(args) -> inference.CollapsedSettings:
     settings = inference.CollapsedSettings.fast() if args.fast else inference.CollapsedSettings()
     settings = replace(settings, inference=args.inference,
                        control=not getattr(args, "no_control", False),
-                       discrepancy=bool(getattr(args, "discrepancy", False)))
+                       discrepancy=bool(getattr(args, "discrepancy", True)))
     if getattr(args, "extrapolation_scale", None) is not None:
         settings = replace(settings, extrapolation_scale=args.extrapolation_scale)
     for flag in ("mu_discrepancy", "mu_discrepancy_floor"):

@@ -11,7 +11,6 @@ import textwrap
 
 from bayeshopf._format import format_interval, format_number, format_values
 from bayeshopf.cli import _schema
-from bayeshopf.model import collapsed as cm
 
 #: The normal form's parameters in the order printed.
 PARAMETERS = ("mu0", "a2", "a4", "mu_fold", "w_unfold")
@@ -145,10 +144,7 @@ def _print_diagnostics(summary: dict) -> None:
               "size; it is in the posterior, so the intervals and bands include it")
     away = diag["fit"].get("extrapolation_scale")
     if away:
-        why = ("as set" if away["chosen_by"] == "setting" else
-               f"the rms over the draws: {cm.EXTRAPOLATION_SCALE_MISFIT:g} in the "
-               f"{100 * away['p_above_limit']:.0f}% whose relative model error is above the "
-               f"{100 * cm.SIGMA_REL_LIMIT:g}% limit, {cm.EXTRAPOLATION_SCALE:g} in the others")
+        why = "as set" if away["chosen_by"] == "setting" else "the model without the discrepancy"
         print(f"bands of new measurements away from the recordings: model-error scale "
               f"{away['scale']:.2g} ({why})")
     for w in diag.get("warnings", []):

@@ -10,10 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
-from bayeshopf.diagnostics.summaries import CI, interval
+from bayeshopf.diagnostics.summaries import interval
 from bayeshopf.features.harmonics import reconstruct
 from bayeshopf.inference import nuts, optimum, svi
-from bayeshopf.model import collapsed as cm
 from bayeshopf.model import horizontal as hz
 
 #: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
@@ -30,7 +29,7 @@ SIGMA_ORBIT_FRACTION = 0.01
 #: Relative model error above which the fit is reported as missing the orbits'
 #: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
 #: harmonic).
-SIGMA_REL_MAX = cm.SIGMA_REL_LIMIT
+SIGMA_REL_MAX = 0.02
 #: What that warning adds about μ0 and the fold: their intervals carry the normal
 #: form's extrapolation, not the misfit (``docs/limits.md`` has the simulated rigs).
 HOPF_FOLD_CAVEAT = ("the Hopf and fold intervals do not carry this misfit, and on simulated "
@@ -173,15 +172,11 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
             warnings.append(line)
     if post.spec.samples_nu_mu:
         d["fit"]["nn_mu_scale"] = post.interval("nu_mu").to_json()
-    if post.settings.extrapolation and (post.settings.extrapolation_scale is not None
-                                        or not post.spec.has_discrepancy):
+    if post.settings.extrapolation and post.extrapolation_scale > 0:
         d["fit"]["extrapolation_scale"] = {
             "scale": post.extrapolation_scale,
             "chosen_by": ("setting" if post.settings.extrapolation_scale is not None
-                          else "relative model error"),
-            "p_above_limit": post.p_misfit,
-            "sigma_rel_ci90": [float(q) for q in np.quantile(
-                np.asarray(post.samples["sigma_rel"]), [0.5 - CI / 2, 0.5 + CI / 2])]}
+                          else "model without the discrepancy")}
     for e in errs:
         if not e["ok"]:
             rel = "none" if e["relative"] is None else f"{100 * e['relative']:.1f}%"
@@ -219,16 +214,16 @@ def diagnose(post, ppc: PosteriorPredictiveCheck | None = None) -> dict:
         warnings.append(f"fit: relative model error {100 * rel:.1f}% (limit "
                         f"{100 * SIGMA_REL_MAX:.0f}%): the model misses the orbits by that "
                         "fraction, and the predictive bands are that wide for that reason; "
-                        + (f"bands of new measurements away from the recordings use the "
-                           f"wider model-error scale {cm.EXTRAPOLATION_SCALE_MISFIT:g} of such "
-                           f"fits in the {100 * post.p_misfit:.0f}% of the draws above the "
-                           "limit, and may still be too narrow"
-                           if post.settings.extrapolation_scale is None else
-                           "bands of new measurements away from the recordings are not "
-                           "calibrated for such a fit")
-                        + " (check them by leave-one-out: bayeshopf.validation.leave_one_out); "
+                        "without the model discrepancy, bands of new measurements away from "
+                        "the recordings are not calibrated for such a fit (check them by "
+                        "leave-one-out: bayeshopf.validation.leave_one_out); "
                         + HOPF_FOLD_CAVEAT)
-    if rel > SIGMA_REL_MAX and run.method == "importance":
+    if run.method == "importance" and not post.spec.has_discrepancy:
+        warnings.append("posterior: importance sampling of a model without the discrepancy "
+                        "can miss the long upper tail of μ0's posterior, which its check "
+                        "cannot see; compare with NUTS (fit --nuts-check, or --inference "
+                        "nuts; docs/inference.md)")
+    elif rel > SIGMA_REL_MAX and run.method == "importance":
         warnings.append("posterior: importance sampling draws about the MAP, and the posterior "
                         "of a fit that misses the orbits this much can hold mass the draws do "
                         "not reach, which its check cannot see; compare with NUTS (fit "

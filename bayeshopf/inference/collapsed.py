@@ -12,14 +12,14 @@ over a handful of parameters: the normal form's gaps (and the unfolding's ``w``)
    below :data:`MAP_GTOL` (finished by a root find on the gradient where the
    line search stops at the value's rounding); the final norm is reported
    (:mod:`bayeshopf.inference.optimum`).
-3. **Posterior.** ``"nuts"`` (default): NumPyro's NUTS kernel, ``num_chains``
-   chains started at the MAP point with the mass matrix started at the MAP's
-   Laplace covariance, advanced in compiled chunks and extended while R̂ or
-   bulk ESS (ArviZ) of a checked site fails, up to ``max_samples``
-   (:mod:`bayeshopf.inference.nuts`). ``"importance"``: draws from a Student-t
-   at the MAP point with its Laplace covariance, adapted once and weighted by
-   the posterior, Pareto-smoothed, NUTS where their check fails
-   (:mod:`bayeshopf.inference.importance`). ``"svi"``: a full-rank Gaussian
+3. **Posterior.** ``"importance"`` (default): draws from a Student-t at the
+   MAP point with its Laplace covariance, adapted once and weighted by the
+   posterior, Pareto-smoothed, NUTS where their check fails
+   (:mod:`bayeshopf.inference.importance`). ``"nuts"``: NumPyro's NUTS kernel,
+   ``num_chains`` chains started at the MAP point with the mass matrix started
+   at the MAP's Laplace covariance, advanced in compiled chunks and extended
+   while R̂ or bulk ESS (ArviZ) of a checked site fails, up to ``max_samples``
+   (:mod:`bayeshopf.inference.nuts`). ``"svi"``: a full-rank Gaussian
    autoguide started at the MAP point, with an ELBO-plateau test
    (:mod:`bayeshopf.inference.svi`).
 4. **Map draws.** For every posterior draw, one exact draw of the map's linear
@@ -260,7 +260,8 @@ def sample_posterior(inputs: ModelInputs, map_point: MapPoint,
                 if method == "nuts" else f"{settings.svi_steps} steps" if method == "svi" else
                 f"{3 * importance.PROPOSALS} draws from the MAP's Laplace approximation, "
                 "NUTS if their check fails")
-        print(f"posterior: {method.upper()} on the collapsed model ({what})", file=sys.stderr)
+        name = "importance sampling" if method == "importance" else method.upper()
+        print(f"posterior: {name} on the collapsed model ({what})", file=sys.stderr)
     sampler = {}
     if method == "nuts":   # run_nuts starts the imports once its first chunk is dispatched
         chains, div, sampler = nuts.run_nuts(inputs, map_point, settings, k_post, progress)

@@ -43,10 +43,10 @@ class CollapsedSettings:
     Attributes:
         n_harmonics: Harmonics per channel of the features.
         segment_periods: Segment length in periods.
-        nn_width: Hidden units of the map's network; ``None``: its limit of
-            infinite width, a Gaussian process with the network's kernel
-            (:mod:`bayeshopf.model.network_kernel`), which has no hidden layer
-            to draw.
+        nn_width: Hidden units of the map's network; ``None`` (the default):
+            its limit of infinite width, a Gaussian process with the network's
+            kernel (:mod:`bayeshopf.model.network_kernel`), which has no hidden
+            layer to draw.
         nn_mu_scale: At infinite width, the scale ``ν`` of the network's input
             weight on μ̃ (how fast the map may bend in μ, and how fast a
             prediction's spread grows away from the recordings); ``None``:
@@ -59,9 +59,9 @@ class CollapsedSettings:
             curvature) or ``"window"`` (that curve with a window of learned depth
             and width in its curvature at the fold; both
             :mod:`bayeshopf.model.horizontal`, subcritical only).
-        inference: ``"nuts"`` (default), ``"importance"`` (draws from the MAP's
-            Laplace approximation weighted by the posterior, NUTS where their
-            check fails; :mod:`bayeshopf.inference.importance`) or ``"svi"``.
+        inference: ``"importance"`` (the default: draws from the MAP's Laplace
+            approximation weighted by the posterior, NUTS where their check
+            fails; :mod:`bayeshopf.inference.importance`), ``"nuts"`` or ``"svi"``.
         num_chains: NUTS chains (and, times ``num_samples``, the draws that
             importance sampling returns).
         num_warmup: NUTS warm-up steps per chain.
@@ -83,25 +83,21 @@ class CollapsedSettings:
         extrapolation: Whether a new measurement's band includes the model error
             away from the recordings (:func:`~bayeshopf.model.collapsed.extrapolation_sd`;
             zero at the training recordings, so the fit and its checks do not change).
-        extrapolation_scale: Half-normal scale ``S`` of the model error away
-            from the recordings, ``s_e ~ HalfNormal(S)`` in log orbit size; it
-            changes the bands of new measurements only. ``None`` (the default):
-            with the discrepancy none; without it each posterior draw chooses
-            by its relative model error σ_rel,
-            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE_MISFIT` (0.7)
-            where σ_rel is above :data:`~bayeshopf.model.collapsed.SIGMA_REL_LIMIT`
-            (2%), :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1)
-            otherwise (:func:`~bayeshopf.predictive.default_extrapolation_scale`).
+        extrapolation_scale: Half-normal scale ``S`` of an extra model error
+            away from the recordings, ``s_e ~ HalfNormal(S)`` in log orbit size
+            (a user's override; it changes the bands of new measurements only).
+            ``None`` (the default): none with the discrepancy, whose own process
+            widens those bands; without it
+            :data:`~bayeshopf.model.collapsed.EXTRAPOLATION_SCALE` (0.1).
         control: Whether the model includes the response to the control's
             residual fundamental, where the recordings name a control channel
             (:mod:`bayeshopf.model.collapsed`, "Control").
         discrepancy: Whether the model includes the model discrepancy, a
             Gaussian process over the diagram on the orbits' fundamental whose
             scale and length are sampled with the normal form
-            (:mod:`bayeshopf.model.discrepancy`). Off (the default until it is
-            shown to calibrate the bands better than the rule above;
-            ``docs/model_discrepancy.md``), the model has a relative model error
-            ``σ_rel y`` instead.
+            (:mod:`bayeshopf.model.discrepancy`; ``docs/model_discrepancy.md``).
+            On by default; off, the model is exact up to a relative model error
+            ``σ_rel y`` of each coefficient.
         discrepancy_floor: ``κ``, the floor of the discrepancy's scale near the
             Hopf point relative to its training mean
             (:func:`~bayeshopf.model.discrepancy.scales`; 0: purely relative).
@@ -120,13 +116,13 @@ class CollapsedSettings:
     n_harmonics: int = 4
     segment_periods: float = 5.0
     # the map's network
-    nn_width: int | None = 16
+    nn_width: int | None = None
     nn_mu_scale: float | None = 1.0
     nn_seed: int = 0
     # the normal form's unfolding
     unfolding: str = "curved"
     # inference, and NUTS
-    inference: str = "nuts"
+    inference: str = "importance"
     num_chains: int = 4
     num_warmup: int = 500
     num_samples: int = 500
@@ -145,7 +141,7 @@ class CollapsedSettings:
     control: bool = True
     extrapolation_scale: float | None = None
     # the model discrepancy
-    discrepancy: bool = False
+    discrepancy: bool = True
     discrepancy_floor: float = dm.FLOOR
     mu_discrepancy: float = MU_DISCREPANCY
     mu_discrepancy_floor: float = MU_DISCREPANCY_FLOOR
@@ -173,10 +169,9 @@ class CollapsedSettings:
         s = self.extrapolation_scale
         if not _positive_or_none(s):
             raise FitError("extrapolation_scale: a positive number or None expected (the "
-                           "half-normal scale of the model error away from the recordings, "
-                           f"in log orbit size; None: {cm.EXTRAPOLATION_SCALE} or "
-                           f"{cm.EXTRAPOLATION_SCALE_MISFIT} by the fit's relative model "
-                           f"error, or none with the discrepancy); got {s!r}")
+                           "half-normal scale of an extra model error away from the "
+                           "recordings, in log orbit size; None: none with the discrepancy, "
+                           f"{cm.EXTRAPOLATION_SCALE} without it); got {s!r}")
 
     @classmethod
     def fast(cls) -> CollapsedSettings:

@@ -102,8 +102,6 @@ from bayeshopf.model import network_kernel as nk
 from bayeshopf.model.extrapolation import (  # noqa: F401 (re-exported)
     EXTRAPOLATION_LENGTH,
     EXTRAPOLATION_SCALE,
-    EXTRAPOLATION_SCALE_MISFIT,
-    SIGMA_REL_LIMIT,
     extrapolation_sd,
 )
 from bayeshopf.model.frequency import (  # noqa: F401 (re-exported)

@@ -1,4 +1,4 @@
-r"""Extra model error away from the recordings: the rule of the model without the discrepancy.
+r"""Extra model error away from the recordings, for a fit without the discrepancy.
 
 Predictions only (the fit does not see it), and a user's override
 (``CollapsedSettings.extrapolation_scale``). A new recording at μ on branch
@@ -12,10 +12,8 @@ branch's training recordings,
 
 ``s_e ~ HalfNormal(S)``, ``ℓ =`` :data:`EXTRAPOLATION_LENGTH` ``· Δμ``, with ``S``
 the setting ``extrapolation_scale``; unset, a fit with the discrepancy takes
-none, and a fit without it takes :data:`EXTRAPOLATION_SCALE` in a posterior draw
-whose σ_rel is within :data:`SIGMA_REL_LIMIT` and :data:`EXTRAPOLATION_SCALE_MISFIT`
-in one above it (``predictive.default_extrapolation_scale``, the rule of the model
-without the discrepancy, kept while the discrepancy is not the default).
+none (its own process widens the bands away from the recordings) and a fit
+without it :data:`EXTRAPOLATION_SCALE`.
 """
 
 from __future__ import annotations
@@ -23,15 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 #: Half-normal scale of the extra model error away from the recordings, ``s_e`` (log
-#: orbit size), of a fit without the model discrepancy whose relative model error σ_rel
-#: passes its check (:data:`SIGMA_REL_LIMIT`; module docstring).
+#: orbit size), of a fit without the model discrepancy (module docstring).
 EXTRAPOLATION_SCALE = 0.1
-#: The same in a posterior draw whose σ_rel is above :data:`SIGMA_REL_LIMIT`
-#: (``predictive.default_extrapolation_scale``), for a fit without the discrepancy.
-EXTRAPOLATION_SCALE_MISFIT = 0.7
-#: Relative model error σ_rel above which a fit without the discrepancy misses the
-#: orbits' sizes (its prior scale, 2% of each coefficient).
-SIGMA_REL_LIMIT = 0.02
 #: Its correlation length as a fraction of the recordings' μ span Δμ.
 EXTRAPOLATION_LENGTH = 1.0 / 3.0
 

@@ -36,13 +36,16 @@ The analysis is the one `bh.fit` (and `bayeshopf fit`) runs:
 3. **MAP**: a deterministic start and L-BFGS. The map's coefficients enter the features
    linearly, so they are integrated out exactly, and only a handful of nonlinear
    parameters remain;
-4. **NUTS**: four chains on those parameters, with R̂ and ESS checked; one exact draw of
-   the map per posterior draw;
+4. **posterior**: draws from the MAP's Laplace approximation weighted by the posterior
+   (importance sampling, with its check; NUTS where the check fails); one exact draw of
+   the map per posterior draw. The model includes a **discrepancy** between the normal
+   form plus map and the system, learned with the rest, so the intervals widen where
+   the recordings disagree with the model;
 5. **bands**: intervals of μ0, a2 and μ_fold, the bifurcation diagram with credible
    bands, predictive checks, frequencies, time series and predictions at new μ.
 
 Set the environment variable `BAYESHOPF_FAST=1` before starting the kernel for a quick run
-(two short chains; the convergence checks then usually warn). The stored outputs come
+(a shorter MAP; the checks may then warn). The stored outputs come
 from a run with the default settings."""),
     new_code_cell("""import os
 
@@ -120,13 +123,15 @@ for i, name in enumerate(features.names):
 display(Markdown("\\n".join(rows)))
 print(f"{features.n_harmonics} harmonics -> {features.coeffs.shape[-1]} coefficients per "
       "channel and recording")"""),
-    new_markdown_cell("""## 3–4. MAP, then NUTS
+    new_markdown_cell("""## 3–4. MAP, then the posterior
 
 `bh.fit` runs the whole chain: features, a grid over the two gaps (from the data to
-the fold and to the Hopf point) as a deterministic start, L-BFGS to the MAP, then four
-NUTS chains with a dense mass matrix on the few nonlinear parameters (the gaps, the
-unfolding's curvature `w`, two prior scales of the map, the model errors). Nothing is
-random in the start, and everything is reproducible from `seed`. The first fit in a
+the fold and to the Hopf point) as a deterministic start, L-BFGS to the MAP, then
+importance sampling on the few nonlinear parameters (the gaps, the unfolding's
+curvature `w`, the map's prior scales, the discrepancy's scale and length, the model
+errors): Student-t draws about the MAP weighted by the posterior, Pareto-smoothed, and
+checked (`inference="nuts"` runs NUTS instead). Nothing is random in the start, and
+everything is reproducible from `seed`. The first fit in a
 fresh environment spends part of its time compiling; JAX's persistent compilation cache
 makes later fits start faster. The result, a `bh.Fit`, is immutable."""),
     new_code_cell("""settings = bh.Settings.fast() if FAST else bh.Settings()
@@ -136,18 +141,24 @@ print("seconds per stage:", {k: round(v, 1) for k, v in fit.timings.items()})"""
     new_markdown_cell("""### Did it converge?
 
 `fit.diagnostics` holds the checks that `summary.json` gets, one status per check (the
-MAP's gradient norm, NUTS's R̂ and bulk ESS of the quantities of interest, each
+MAP's gradient norm, the posterior's check (importance sampling's Pareto k̂ and
+effective draws, or NUTS's R̂ and bulk ESS of the quantities of interest), each
 recording's orbit error, the predictive checks, the model error) and one warning line per
 failed check (the CLI prints them); `fit.diagnostics.details` holds their numbers."""),
     new_code_cell("""print(fit.diagnostics)
 d = fit.diagnostics.details
 print(f"\\nMAP: gradient norm {d['map']['grad_norm']:.2g} after {d['map']['steps']} L-BFGS steps "
       f"(converged: {d['map']['converged']})")
-rows = ["| site | R̂ | bulk ESS | ok |", "|---|---:|---:|---|"]
-for name, v in d["posterior"]["sites"].items():
-    rows.append(f"| {name} | {v['r_hat']:.3f} | {v['ess_bulk']:.0f} | {'yes' if v['ok'] else '**no**'} |")
-display(Markdown("\\n".join(rows)))
-print(f"{d['posterior']['divergences']} divergent transitions")"""),
+post = d["posterior"]
+if post["method"] == "importance":
+    print(f"importance sampling: Pareto k̂ {post['pareto_k']:.2f} (at most {post['k_max']}), "
+          f"{post['ess']:.0f} effective of {post['proposals']} draws")
+else:
+    rows = ["| site | R̂ | bulk ESS | ok |", "|---|---:|---:|---|"]
+    for name, v in post["sites"].items():
+        rows.append(f"| {name} | {v['r_hat']:.3f} | {v['ess_bulk']:.0f} | {'yes' if v['ok'] else '**no**'} |")
+    display(Markdown("\\n".join(rows)))
+    print(f"{post['divergences']} divergent transitions")"""),
     new_markdown_cell("""## 5. Bands
 
 ### The Hopf point, the cubic coefficient and the fold

@@ -20,8 +20,9 @@ Pol oscillator** (supercritical Hopf point at μ = 0) and a **3-DOF aeroelastic 
 Hopf point at 18.27 m/s, fold of cycles at 14.94 m/s). Their fits were started with μ0 and a2 at the
 true values, on noise-free data, and gave point estimates.
 
-Here both are refitted **blind** with `bh.fit` (as `bayeshopf fit` does): a deterministic start from the data, the MAP, then NUTS over the normal form
-and the hyperparameters with the map's linear coefficients integrated out exactly. The recordings
+Here both are refitted **blind** with `bh.fit` (as `bayeshopf fit` does): a deterministic start from the data, the MAP, then importance sampling
+(NUTS where its check fails) over the normal form and the hyperparameters with the map's linear
+coefficients integrated out exactly, and a model discrepancy learned with the rest. The recordings
 carry 1 % measurement noise and sensor offsets, and every result has a 90 % interval. The truth is
 the simulator's own (`bayeshopf.simulators`): the Hopf point from the Jacobian eigenvalues, and the
 periodic orbits, their amplitudes and the fold by shooting and pseudo-arclength continuation. The
@@ -30,13 +31,13 @@ checks:
 * the 90 % intervals of μ0 (both systems) and of the fold μ_SN (aerofoil) contain the truth;
 * orbits at μ values **not used for training** lie inside the 90 % posterior predictive bands;
 * the fitted bifurcation diagram and phase portraits follow the true ones;
-* the fit's own checks pass (NUTS R̂ and bulk ESS, orbit errors, predictive checks:
+* the fit's own checks pass (the posterior's check, orbit errors, predictive checks:
   `fit.diagnostics`);
 * over 20 noise seeds, the intervals cover the truth at about their nominal rate
   (`benchmarks/bench_calibration_collapsed.py`, summarised at the end).
 
-Set `BAYESHOPF_FAST=1` before starting the kernel for a quick run (short records and short NUTS
-chains, whose convergence checks then usually warn)."""),
+Set `BAYESHOPF_FAST=1` before starting the kernel for a quick run (short records and a short
+MAP, whose checks may then warn)."""),
     new_code_cell("""import os
 
 FAST = os.environ.get("BAYESHOPF_FAST", "0") == "1"
@@ -55,8 +56,8 @@ import bayeshopf.simulators.truth  # loads bh.simulators.truth (the simulated ex
 
 %matplotlib inline
 settings = bh.Settings.fast() if FAST else bh.Settings()
-print(f"bayeshopf {bh.__version__}; fast mode: {FAST}; NUTS {settings.num_chains} chains x "
-      f"({settings.num_warmup} + {settings.num_samples})")
+print(f"bayeshopf {bh.__version__}; fast mode: {FAST}; posterior: {settings.inference}, "
+      f"{settings.num_chains * settings.num_samples} draws")
 
 
 def interval_table(fit, truth):
@@ -84,7 +85,7 @@ def held_out_table(rows, unit):
 
 
 def show_diagnostics(fit):
-    # the fit's own checks: MAP, NUTS convergence, orbit errors, warnings
+    # the fit's own checks: MAP, the posterior's check, orbit errors, warnings
     d = fit.diagnostics.details
     p = d["posterior"]
     line = f"MAP gradient norm {d['map']['grad_norm']:.1e} ({'converged' if d['map']['converged'] else 'NOT converged'})"
@@ -93,6 +94,9 @@ def show_diagnostics(fit):
         e = min(v["ess_bulk"] for v in p["sites"].values())
         line += (f"; NUTS {p['chains']} chains: largest R-hat {r:.3f} (limit {p['r_hat_max']}), "
                  f"smallest bulk ESS {e:.0f} (limit {p['ess_min']}), {p['divergences']} divergences")
+    elif p["method"] == "importance":
+        line += (f"; importance sampling: Pareto k-hat {p['pareto_k']:.2f} (limit {p['k_max']}), "
+                 f"{p['ess']:.0f} effective draws")
     print(line)
     errs = [e["relative"] for e in d["fit"]["orbit_error"] if e["relative"] is not None]
     print(f"orbit errors {100 * min(errs):.2f}-{100 * max(errs):.2f}% of the orbit size; "
@@ -221,7 +225,8 @@ data the model is fitted to) against theirs, standardised."""),
 
 One fit says little about calibration. `benchmarks/bench_calibration_collapsed.py` repeats the
 aerofoil experiment with 20 noise seeds (100–119: new noise, phases and sensor offsets each time, the
-same μ plan, default settings, none chosen on these seeds) and counts how often the 90 % intervals
+same μ plan, the settings that were the default before session 78: no model discrepancy, NUTS;
+none chosen on these seeds) and counts how often the 90 % intervals
 contain the truth, and compares their widths with the spread of the posterior medians across seeds
 (an interval much wider than that spread is right for the wrong reason). Its summary, as stored in
 `benchmarks/calibration_collapsed.md` (a2 is not compared: under the curved unfolding it has no
