@@ -224,8 +224,11 @@ def test_download_command(user_without_shared, tmp_path, capsys):
 @pytest.fixture(scope="module")
 def fitted(good_data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fit") / "out"
+    # the model without the discrepancy, whose programs compile faster (the default model
+    # goes through the CLI in test_readme's demo and test_rig_description's second rig)
     assert main(["fit", str(good_data), "--out", str(out), "--fast", "--quiet", "--seed", "1",
-                 "--inference", "svi", "--nuts-check"]) == 0
+                 "--inference", "svi", "--nuts-check", "--no-discrepancy", "--nn-width",
+                 "16"]) == 0
     return out
 
 
@@ -348,10 +351,12 @@ def test_fit_ci_level_reaches_summary_and_table(fitted, good_data, tmp_path, mon
     printed = capsys.readouterr().out
     assert "80% interval" in printed and "predicted (80%)" in printed
     assert "inside their 80% predictive intervals" in printed
-    # with the discrepancy (the default) no extra model error away from the recordings
-    assert post.spec.has_discrepancy and post.extrapolation_scale == 0.0
-    assert "extrapolation_scale" not in s["diagnostics"]["fit"]
-    assert "bands of new measurements away from the recordings" not in printed
+    # without the discrepancy a fixed extra model error away from the recordings, 0.1
+    assert not post.spec.has_discrepancy and post.extrapolation_scale == 0.1
+    assert s["diagnostics"]["fit"]["extrapolation_scale"] == {
+        "scale": 0.1, "chosen_by": "model without the discrepancy"}
+    assert ("bands of new measurements away from the recordings: model-error scale 0.1 "
+            "(the model without the discrepancy)") in printed
     assert main(["fit", str(good_data), "--out", str(tmp_path / "o"), "--ci", "90"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--ci 90" in err

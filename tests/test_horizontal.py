@@ -149,9 +149,10 @@ def test_a_fit_with_it_predicts_saves_and_loads(tmp_path, unfolding, site):
     from bayeshopf.data.synthetic import demo_system
 
     rs, truth = demo_system(seed=0, fast=True)
-    # the wiring, not the statistics: one short chain
+    # the wiring, not the statistics: one short chain of NUTS, without the discrepancy
     settings = replace(bh.Settings.fast(), unfolding=unfolding, num_chains=1,
-                       num_warmup=100, num_samples=100, max_samples=100)
+                       num_warmup=100, num_samples=100, max_samples=100, inference="nuts",
+                       discrepancy=False, nn_width=16)
     fit = bh.fit(rs, settings, seed=0, progress=False)
     assert fit.interval(site) is not None and fit.interval("w_unfold") is None
     d = fit.diagram()
