@@ -311,7 +311,7 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
     ``coeffs`` are the fit's orbits at μ
     (:meth:`~bayeshopf.posterior.HybridPosterior.orbit_coefficients`, with the
     model discrepancy where the fit has it); the noise is the fit's own
-    new-measurement noise (``_noise_sd``), the one path every prediction takes.
+    new-measurement noise (``noise_sd``), the one path every prediction takes.
     """
     from bayeshopf import predictive as pr
 
@@ -325,8 +325,7 @@ def _replicates(fit, coeffs, mu, branch: str, se, rng) -> np.ndarray:
                                          scale=scale)
         c = pr.scale_orbits(c.reshape((-1,) + c.shape[2:]), factor).reshape(c.shape)
     if fit.spec.has_discrepancy:
-        post = getattr(fit, "posterior", fit)     # a front door's Fit holds its posterior
-        sd = post._noise_sd(coeffs, se, [mu], branch)[:, None]       # (S, 1, 1, 2, 2K+1)
+        sd = fit.noise_sd(coeffs, se, [mu], branch)[:, None]         # (S, 1, 1, 2, 2K+1)
     else:
         idx = pr.draw_indices(len(fit.samples["sigma"]), N_DRAWS)
         sd = pr.noise_sd(c, np.asarray(fit.samples["sigma"])[idx],

@@ -108,14 +108,6 @@ class HybridPosterior:
         s = self.samples
         return np.asarray(s.get(name + RIG, s[name]))
 
-    def extrapolation_scales(self, n_draws: int | None = N_BAND_DRAWS) -> np.ndarray:
-        """The scale ``S`` of the extra model error away from the recordings, per draw.
-
-        For the draws :meth:`orbit_coefficients` uses with ``n_draws``, all equal
-        to :attr:`extrapolation_scale`.
-        """
-        return np.full(len(self._draw_indices(n_draws)), self.extrapolation_scale)
-
     @property
     def extrapolation_scale(self) -> float:
         """The scale ``S`` of the extra model error away from the recordings.
@@ -250,10 +242,11 @@ class HybridPosterior:
             return None
         return np.asarray(self.features.control)[i][None]
 
-    def _noise_sd(self, coeffs, coeffs_se=None, mu=None, branch: str = "stable"):
+    def noise_sd(self, coeffs, coeffs_se=None, mu=None, branch: str = "stable"):
         """Predictive sd of a new recording's coefficients (model error + se), as ``coeffs``.
 
-        With the discrepancy, its independent part ``σ_rel g`` at ``mu`` (the
+        The one noise every prediction of a new recording takes (``predict``,
+        the checks, ``next``). With the discrepancy, its independent part ``σ_rel g`` at ``mu`` (the
         μ of ``coeffs``' second axis, or of a training recording for ``coeffs``
         of one μ) replaces ``σ_rel c``.
         """
@@ -297,7 +290,7 @@ class HybridPosterior:
         if predictive:
             c = self._away_from_data(c, mu, branch)
             rng = np.random.default_rng(self.seed)
-            c = c + self._noise_sd(c, coeffs_se, mu, branch) * _common_over_mu(rng, c.shape)
+            c = c + self.noise_sd(c, coeffs_se, mu, branch) * _common_over_mu(rng, c.shape)
         return self._amplitude_of(c)
 
     def _away_from_data(self, coeffs, mu, branch: str) -> np.ndarray:
@@ -305,13 +298,13 @@ class HybridPosterior:
 
         :func:`extrapolation_factor` from this branch's training μ; zero at them.
         """
-        if not self.settings.extrapolation:
+        if not self.settings.extrapolation or self.extrapolation_scale == 0:
             return coeffs
         f = self.features
         mu_data = f.mu[f.unstable == (branch == "unstable")]
-        n = np.shape(coeffs)[0]
         return scale_orbits(coeffs, extrapolation_factor(
-            mu, mu_data, self.spec.mu_span, n, self.seed, scale=self.extrapolation_scales(n)))
+            mu, mu_data, self.spec.mu_span, np.shape(coeffs)[0], self.seed,
+            scale=self.extrapolation_scale))
 
     def control_gain(self, ci: float = CI) -> dict | None:
         """The orbits' response to the control's fundamental, or ``None`` without the term.
@@ -423,7 +416,7 @@ class HybridPosterior:
         amp = self._amplitude_of(c)
         rng = np.random.default_rng(self.seed)
         ce = self._away_from_data(c, mu, branch)
-        amp_p = self._amplitude_of(ce + self._noise_sd(ce, None, mu, branch)
+        amp_p = self._amplitude_of(ce + self.noise_sd(ce, None, mu, branch)
                                    * _common_over_mu(rng, c.shape))
         q, p = quantiles(amp, at)
         qp, _ = quantiles(amp_p, at)
@@ -501,7 +494,7 @@ class HybridPosterior:
         reps = []
         rng = np.random.default_rng(self.seed)
         for i, c in enumerate(self.training_coefficients):
-            rep = c + self._noise_sd(c, f.coeffs_se[i], [f.mu[i]],
+            rep = c + self.noise_sd(c, f.coeffs_se[i], [f.mu[i]],
                                      "unstable" if f.unstable[i] else "stable"
                                      ) * rng.standard_normal(c.shape)
             reps.append(rep)

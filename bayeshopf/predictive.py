@@ -198,8 +198,8 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
         mu_span: The recordings' μ span Δμ.
         n: Draws.
         seed: Seed (its own stream, apart from the measurement noise's).
-        scale: Half-normal scale of ``s_e``, one for all draws or ``(n,)``, one per
-            draw (:meth:`HybridPosterior.extrapolation_scales`).
+        scale: Half-normal scale of ``s_e``
+            (:attr:`HybridPosterior.extrapolation_scale`).
     """
     rng = np.random.default_rng([seed, 1])
     s = np.abs(rng.normal(0.0, np.broadcast_to(scale, (n,)), n))

@@ -391,7 +391,6 @@ def test_without_the_discrepancy_the_scale_away_from_the_data_is_fixed_and_a_mis
     draws = np.asarray(post.samples["sigma_rel"])
     assert draws.max() < SIGMA_REL_MAX
     assert post.extrapolation_scale == 0.1
-    assert np.all(post.extrapolation_scales() == 0.1)
     d = diagnose(post)
     assert not [w for w in d["warnings"] if "relative model error" in w]
     assert d["fit"]["extrapolation_scale"] == {"scale": 0.1,
@@ -400,7 +399,7 @@ def test_without_the_discrepancy_the_scale_away_from_the_data_is_fixed_and_a_mis
     chains = {**post.run.chains, "sigma_rel": post.run.chains["sigma_rel"]
               - np.quantile(draws, 0.3) + SIGMA_REL_MAX}
     bad = replace(post, run=replace(post.run, chains=chains))
-    assert np.all(bad.extrapolation_scales() == 0.1)
+    assert bad.extrapolation_scale == 0.1
     d = diagnose(bad)
     (w,) = [w for w in d["warnings"] if "relative model error" in w]
     assert "not calibrated for such a fit" in w and "by leave-one-out" in w
@@ -418,6 +417,9 @@ def test_without_the_discrepancy_the_scale_away_from_the_data_is_fixed_and_a_mis
     np.testing.assert_allclose(band(bad, [f.mu[i]]), band(wide, [f.mu[i]]), rtol=1e-4)
     b, w7 = band(bad, beyond), band(wide, beyond)
     assert 3 * (b[2] - b[0]) < w7[2] - w7[0], (b, w7)
+    # every draw takes 0.1, whatever its σ_rel: the band is that of 0.1 set by hand
+    set01 = replace(bad, settings=replace(bad.settings, extrapolation_scale=0.1))
+    np.testing.assert_array_equal(b, band(set01, beyond))
     fit_folder.save_hybrid(bad, tmp_path / "fit")
     saved = fit_folder.load_fit(tmp_path / "fit")
     assert saved.extrapolation["scale"] is None and saved.posterior.extrapolation_scale == 0.1

@@ -13,6 +13,7 @@ from bayeshopf.diagnostics.ppc import PosteriorPredictiveCheck
 from bayeshopf.diagnostics.summaries import interval
 from bayeshopf.features.harmonics import reconstruct
 from bayeshopf.inference import nuts, optimum, svi
+from bayeshopf.model import collapsed as cm
 from bayeshopf.model import horizontal as hz
 
 #: Orbit error (relative RMS distance) a recording's posterior-median orbit may have.
@@ -27,9 +28,9 @@ SIGMA_RATIO_MAX = 10.0
 #: 0.2% of the orbit is no misfit worth a warning, however clean the data).
 SIGMA_ORBIT_FRACTION = 0.01
 #: Relative model error above which the fit is reported as missing the orbits'
-#: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)`` (2% of each
-#: harmonic).
-SIGMA_REL_MAX = 0.02
+#: sizes: σ_rel, or with the model discrepancy ``√(η² + σ_rel²)``; σ_rel's prior
+#: scale (2% of each harmonic).
+SIGMA_REL_MAX = cm.SIGMA_REL_PRIOR
 #: What that warning adds about μ0 and the fold: their intervals carry the normal
 #: form's extrapolation, not the misfit (``docs/limits.md`` has the simulated rigs).
 HOPF_FOLD_CAVEAT = ("the Hopf and fold intervals do not carry this misfit, and on simulated "
