@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from bayeshopf.discrepancy.terms import library, library_system
 from bayeshopf.simulators import FLUTTER3DOF
@@ -75,8 +76,17 @@ def test_the_library_systems_programs_are_traced_by_the_first_process_only(tmp_p
     assert n_first >= 1 and n_second == 0
     np.testing.assert_array_equal(first, second)
     assert len(list(tmp_path.glob("bayeshopf-exported-orbits-shoot-*.bin"))) == 1
-    # a user's EQX_ON_ERROR=raise puts a host callback in the flow's program (diffrax checks
-    # its save times): nothing is stored, and it is traced in every process, same result
+
+
+@pytest.mark.slow
+def test_a_user_s_eqx_on_error_raise_stores_nothing_and_traces_every_time(tmp_path):
+    """With a user's EQX_ON_ERROR=raise nothing is stored; the flow is traced every time.
+
+    The setting puts a host callback in the flow's program (diffrax checks its
+    save times), which cannot be stored: each process traces it again and gets
+    the same result. Slow (two fresh processes); in the normal suite,
+    ``test_inference_setup`` checks which programs hold that callback.
+    """
     other = tmp_path / "raise"
     raised, n_raised = _run(other, "raise", "flow", "one")
     again, n_again = _run(other, "raise", "flow", "one")

@@ -373,14 +373,14 @@ def test_rig_toml_beside_the_data_is_found(rig2, tmp_path):
 def test_second_rig_fits_end_to_end_from_the_cli(rig2, tmp_path, capsys):
     """``bayeshopf fit DIR --rig rig.toml --fast`` runs to the end; the diagram is subcritical.
 
-    SVI keeps this test in the normal suite (about 25 s; NUTS --fast takes about 60 s).
+    The default model and inference (importance sampling, here with NUTS after its check).
     """
     from bayeshopf.cli.main import main
     from bayeshopf.fit_folder import load_fit
 
     out = tmp_path / "fit"
     code = main(["fit", str(rig2.folder), "--rig", str(rig2.folder / "rig.toml"),
-                 "--out", str(out), "--fast", "--inference", "svi", "--seed", "0"])
+                 "--out", str(out), "--fast", "--seed", "0"])
     err = capsys.readouterr().err
     assert code == 0, err
     for name, mask in rig2.dropouts.items():                 # the log says what was left out

@@ -37,6 +37,13 @@ def test_planted_truth() -> None:
     assert np.isnan(truth.amplitude(19.0, "unstable")) and np.isnan(truth.amplitude(15.0))
     amp = truth.amplitude(np.array([16.0, 17.0, 19.0]))
     assert amp.shape == (3,) and np.all(np.diff(amp) > 0)
+    # the peak-to-peak of the orbit's heave, on the same phases (amplitude drops the
+    # constant terms; a skewed map and both branches)
+    skew = PlantedHopf(T_L=np.array([[0.004, -0.003], [0.02, 0.05]]), nonlinear=0.3)
+    for branch, mus in (("stable", [15.2, 16.0, 19.0, 21.0]), ("unstable", [15.2, 17.9])):
+        z1 = skew.orbit(np.array(mus), branch, 4096)[..., 0]
+        np.testing.assert_allclose(skew.amplitude(np.array(mus), branch), np.ptp(z1, axis=-1),
+                                   rtol=1e-12)
     # flutter-rig scales: heave a few cm, pitch ~0.1 rad
     z = truth.orbit(19.5)
     assert 0.02 < np.ptp(z[:, 0]) < 0.06 and 0.1 < np.ptp(z[:, 1]) < 0.3

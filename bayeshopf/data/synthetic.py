@@ -267,7 +267,14 @@ class PlantedHopf:
         This is the quantity :func:`bayeshopf.features.extract_harmonics` measures
         as ``HarmonicFeatures.amplitude``.
         """
-        z1 = self.orbit(mu, branch, _N_ORBIT)[..., 0]
+        # z1 of :meth:`orbit` less its constant terms, which a peak-to-peak drops:
+        # a (u1 + ε u1²) + b (u2 + ε u1 u2) = (a cos θ + b sin θ) r (1 + ε r cos θ),
+        # with (a, b) the first row of T_L
+        r = self.radius(mu, branch)[..., None]
+        theta = np.linspace(0.0, 2.0 * np.pi, _N_ORBIT, endpoint=False)
+        a, b = self.T_L[0]
+        z1 = (a * np.cos(theta) + b * np.sin(theta)) * r * (1.0 + self.nonlinear * r
+                                                             * np.cos(theta))
         return np.max(z1, axis=-1) - np.min(z1, axis=-1)
 
     def to_dict(self) -> dict:

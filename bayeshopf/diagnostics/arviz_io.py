@@ -47,11 +47,15 @@ def write_netcdf(idata: az.InferenceData, path: str | os.PathLike[str]) -> Path:
 def read_posterior(path: str | os.PathLike[str]) -> tuple[dict, dict]:
     """Flat posterior draws and the posterior attributes from a netCDF file.
 
+    Only the file's ``posterior`` group is read (xarray, without ArviZ).
+
     Returns:
         ``(samples, attrs)``: site name -> array ``(n_chains · n_draws, ...)``.
     """
-    idata = arviz().from_netcdf(str(path))
-    post = idata.posterior
+    import xarray as xr
+
+    with xr.open_dataset(path, group="posterior") as ds:
+        post = ds.load()
     samples = {}
     for k, v in post.data_vars.items():
         a = np.asarray(v.values)
