@@ -337,9 +337,12 @@ def _with_planted_control(rs, gain, seed):
     recs = []
     for r in rs:
         t, z1 = r.t, r.channels[rs.planar[0]]
-        grid = np.linspace(0.5, 10.0, 20000)
-        power = [abs(np.sum((z1 - z1.mean()) * np.exp(-2j * np.pi * f * t))) for f in grid]
-        omega = 2 * np.pi * grid[int(np.argmax(power))]
+        def peak(grid, z=z1 - z1.mean(), t=t):
+            power = [abs(np.sum(z * np.exp(-2j * np.pi * f * t))) for f in grid]
+            return grid[int(np.argmax(power))]
+
+        coarse = peak(np.linspace(0.5, 10.0, 1901))              # 0.005 Hz apart
+        omega = 2 * np.pi * peak(np.linspace(coarse - 0.01, coarse + 0.01, 401))
         U = rng.uniform(0.5, 1.5) * np.exp(1j * rng.uniform(-np.pi, np.pi))
         phasor = U * np.exp(1j * omega * t)
         ch = dict(r.channels)
