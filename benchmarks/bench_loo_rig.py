@@ -2,9 +2,11 @@
 
 Run: ``python benchmarks/bench_loo_rig.py LABEL [--extrapolation-scale S] [--no-discrepancy]
 [--inference M] [--floor K] [--nn-width H|inf] [--learn-mu-scale] [--unfolding U]
-[--own-too]``.
+[--own-too] [--common-frame]``.
 Each of the rig's 7 recordings is held out in turn, the model refitted on the
-others (seed 0) and the held-out amplitude predicted with its 90% band
+others (seed 0; each refit's frame, the orbits' centre and scale, built without
+the held-out recording; with ``--common-frame`` one frame of all 7, as every
+result before session 79) and the held-out amplitude predicted with its 90% band
 (``bayeshopf.validation.leave_one_out``, the refits kept). The log predictive
 density of each held-out amplitude is a Gaussian kernel density of the refit's
 predictive draws (``amplitude(predictive=True)`` with the recording's standard
@@ -58,8 +60,9 @@ def main(argv):
     rs = load_recordings(RIG)
     f = extract_harmonics(rs, n_harmonics=settings.n_harmonics,
                           segment_periods=settings.segment_periods)
-    loo = leave_one_out(f, "subcritical", methods=("bayes",), seed=0, settings=settings,
-                        keep_fits=True, progress=True)
+    loo = leave_one_out(f if "--common-frame" in argv else rs, "subcritical",
+                        methods=("bayes",), seed=0, settings=settings, keep_fits=True,
+                        progress=True)
     OUT.mkdir(exist_ok=True)
     both = [(label, False)] + ([(label + "_own", True)] if "--own-too" in argv else [])
     for name, own in both:

@@ -26,7 +26,7 @@ One JSON line per screened seed goes to ``benchmarks/results/loo_simulated_rig_s
 
 **Leave-one-out** (``loo``): each recording is held out in turn, the model
 refitted on the other 10 (seed 0; each refit's frame without the held-out
-recording) and the held-out amplitude predicted with its 90% band. Scored as
+recording; before session 79, one frame of all 11) and the held-out amplitude predicted with its 90% band. Scored as
 ``bench_loo_rig.py`` scores the rig: inside or not, and the log predictive
 density of the measured amplitude (a Gaussian kernel density of the refit's
 predictive draws, times the share of draws in which the branch exists), summed
@@ -131,7 +131,7 @@ def loo(seed: int, model: str) -> None:
     t0 = time.perf_counter()
     f = extract_harmonics(rs, n_harmonics=settings.n_harmonics,
                           segment_periods=settings.segment_periods)
-    folds = leave_one_out(f, "subcritical", methods=("bayes",), seed=0, settings=settings,
+    folds = leave_one_out(rs, "subcritical", methods=("bayes",), seed=0, settings=settings,
                           keep_fits=True, progress=True)
     wall = time.perf_counter() - t0
     # with the discrepancy, also the same refits with the normal form's own branches

@@ -184,7 +184,8 @@ def _fit_and_save(rs, criticality, args, out, truth, extra, worker) -> dict:
         if progress:
             print(f"leave-one-out: {post.features.n_recordings} refits, each without one "
                   "recording, which it then predicts", file=sys.stderr)
-        loo = validation.leave_one_out(post.features, post.criticality, methods=("bayes",),
+        # from the recordings: each refit's frame is built without the one it predicts
+        loo = validation.leave_one_out(rs, post.criticality, methods=("bayes",),
                                        seed=args.seed, settings=settings,
                                        keep_fits=not args.no_figures, progress=progress)
         extra = {**(extra or {}), "leave_one_out": loo.report()}
