@@ -24,13 +24,13 @@ whole relative model error) is fitted to all 11 recordings (seed 0); a rig is
 in :data:`MODEL_ERROR` (about 12%: within a factor of two).
 One JSON line per screened seed goes to ``benchmarks/results/loo_simulated_rig_screen.jsonl``.
 
-**Leave-one-out** (``loo``): each recording is held out in turn, the model
-refitted on the other 10 (seed 0; each refit's frame without the held-out
-recording; before session 79, one frame of all 11) and the held-out amplitude predicted with its 90% band. Scored as
-``bench_loo_rig.py`` scores the rig: inside or not, and the log predictive
-density of the measured amplitude (a Gaussian kernel density of the refit's
-predictive draws, times the share of draws in which the branch exists), summed
-over the 11. One JSON line per (seed, model) goes to
+**Leave-one-out** (``loo``): each recording is held out in turn, the model refitted
+on the other 10 (seed 0; each refit's frame without the held-out recording; before
+session 79, one frame of all 11) and the held-out amplitude predicted with its 90%
+band. Scored as ``bench_loo_rig.py`` scores the rig: inside or not, and the log
+predictive density of the measured amplitude (a Gaussian kernel density of the
+refit's predictive draws, times the share of draws in which the branch exists),
+summed over the 11. One JSON line per (seed, model) goes to
 ``benchmarks/results/loo_simulated_rig.jsonl``; for ``kernel`` also
 ``kernel_own``, the same refits scored with the normal form's own branches
 (the rig's Hopf point and fold dropped, ``bench_loo_rig.own_branches``).

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bayeshopf.cli.main import main
-from bayeshopf.data import write_interchange
+from bayeshopf.data import RecordingSet, write_interchange
 from bayeshopf.data.synthetic import demo_system
 
 
@@ -481,8 +481,9 @@ def test_control_channel_named_on_the_command_line(tmp_path, monkeypatch, capsys
 def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_data, tmp_path,
                                                                  monkeypatch, capsys, n_inside,
                                                                  figures):
-    """``fit --leave-one-out``: the refits get the fit's features, criticality, settings and
-    seed; their check joins ``diagnostics`` and warns when the coverage is improbable (the
+    """``fit --leave-one-out``: the refits get the fit's recordings (so that each refit's frame
+    is built without the recording it predicts), criticality, settings and seed; their
+    check joins ``diagnostics`` and warns when the coverage is improbable (the
     fit itself and the refits are replaced here; both are tested in test_validation)."""
     from bayeshopf import fit_folder, posterior, validation
 
@@ -490,8 +491,9 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
     monkeypatch.setattr(posterior, "fit_hybrid", lambda rs, crit, **kw: post)
     seen = {}
 
-    def refits(features, criticality, **kw):
-        seen.update(features=features, criticality=criticality, **kw)
+    def refits(data, criticality, **kw):
+        seen.update(data=data, criticality=criticality, **kw)
+        features = post.features
         names, folds = features.names, []
         for i, name in enumerate(names):
             a = float(features.amplitude[i])
@@ -510,7 +512,8 @@ def test_fit_leave_one_out_reaches_summary_diagnostics_and_table(fitted, good_da
                  "--leave-one-out", *([] if figures else ["--no-figures"])]) == 0
     assert seen["keep_fits"] is figures      # the folds' fits only for the figure
     assert (out / "figures" / "leave_one_out.png").is_file() is figures
-    assert seen["features"] is post.features and seen["criticality"] == "subcritical"
+    assert isinstance(seen["data"], RecordingSet) and seen["criticality"] == "subcritical"
+    assert [r.mu for r in seen["data"]] == post.features.mu.tolist()
     assert seen["seed"] == 1 and seen["methods"] == ("bayes",)
     assert seen["settings"].inference == "importance" and seen["settings"].control is True
     s = json.loads((out / "summary.json").read_text())

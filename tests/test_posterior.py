@@ -337,7 +337,9 @@ def _with_planted_control(rs, gain, seed):
     recs = []
     for r in rs:
         t, z1 = r.t, r.channels[rs.planar[0]]
-        def peak(grid, z=z1 - z1.mean(), t=t):
+        z = z1 - z1.mean()
+
+        def peak(grid, z=z, t=t):
             power = [abs(np.sum(z * np.exp(-2j * np.pi * f * t))) for f in grid]
             return grid[int(np.argmax(power))]
 

@@ -147,7 +147,8 @@ growing away from them)."""),
     new_markdown_cell("""## 3. Leave-one-out: is the fit robust?
 
 Each recording is held out in turn and the model refitted on the other six
-(`bh.validation.leave_one_out`).
+(`bh.validation.leave_one_out`, from the recordings: each refit's frame, the orbits' centre and
+scale, is built without the recording it predicts).
 Two predictions per fold, both from that fold's fit:
 * **Bayesian**: posterior median and the 90% band of a new measurement (the posterior predictive,
   with the held-out recording's own standard errors and the model discrepancy at its μ);
@@ -160,7 +161,7 @@ that calibrated 90% bands hold this few held-out recordings or fewer (binomial, 
 independent). The figure is the paper's Fig. exp_val with bands; the star is the held-out recording
 (filled when inside the Bayesian 90% band). The last panel shows the fold of every fold."""),
     new_code_cell("""folds = rs.names[2:4] if FAST else None
-loo = bh.validation.leave_one_out(feats, "subcritical", seed=0, settings=settings, folds=folds,
+loo = bh.validation.leave_one_out(rs, "subcritical", seed=0, settings=settings, folds=folds,
                                   keep_fits=True, progress=False)
 rows = ["| method | held-out inside 90% | P(this few or fewer), calibrated bands | mean held-out error | max error | sd of μ_SN over folds | μ_SN range |",
         "|---|---:|---:|---:|---:|---:|---|"]
