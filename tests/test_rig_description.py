@@ -373,7 +373,7 @@ def test_rig_toml_beside_the_data_is_found(rig2, tmp_path):
 def test_second_rig_fits_end_to_end_from_the_cli(rig2, tmp_path, capsys):
     """``bayeshopf fit DIR --rig rig.toml --fast`` runs to the end; the diagram is subcritical.
 
-    The default model and inference (importance sampling, here with NUTS after its check).
+    The default model and inference (importance sampling, NUTS where its check fails).
     """
     from bayeshopf.cli.main import main
     from bayeshopf.fit_folder import load_fit
