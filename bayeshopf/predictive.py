@@ -202,7 +202,7 @@ def extrapolation_factor(mu, mu_data, mu_span: float, n: int, seed: int, *,
             (:attr:`HybridPosterior.extrapolation_scale`).
     """
     rng = np.random.default_rng([seed, 1])
-    s = np.abs(rng.normal(0.0, np.broadcast_to(scale, (n,)), n))
+    s = np.abs(rng.normal(0.0, scale, n))
     z = rng.standard_normal(n)
     c = cm.extrapolation_sd(mu, mu_data, cm.EXTRAPOLATION_LENGTH * mu_span)
     return np.exp((s * z)[:, None] * c[None])
